@@ -1,0 +1,5 @@
+"""Pure-JAX environments behind one protocol (`envs.base.Env`)."""
+
+from envs.registry import make, names
+
+__all__ = ["make", "names"]

@@ -1,0 +1,37 @@
+"""Environment names: the only place they are spelled."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from envs.cartpole import CartPole, EnvParams
+
+_CARTPOLE = {
+    "cartpole-v0": EnvParams(max_steps=200, forces=(-10.0, 10.0)),
+    "cartpole-v1": EnvParams(max_steps=500, forces=(-10.0, 10.0)),
+    "cartpole-v2": EnvParams(max_steps=1000, forces=(-10.0, -5.0, 0.0, 5.0, 10.0)),
+}
+
+
+def _cartpole(name: str) -> Callable[[], tuple[Any, Any]]:
+    return lambda: (CartPole(), _CARTPOLE[name])
+
+
+_REGISTRY: dict[str, Callable[[], tuple[Any, Any]]] = {name: _cartpole(name) for name in _CARTPOLE}
+
+MUJOCO_NAMES = ("ant", "halfcheetah", "hopper", "reacher", "walker2d", "inverted_pendulum")
+
+
+def names() -> tuple[str, ...]:
+    """Every env name `make` accepts."""
+    return tuple(_REGISTRY)
+
+
+def make(name: str) -> tuple[Any, Any]:
+    """Return `(env, params)` for a registered name."""
+    if name not in _REGISTRY:
+        if name in MUJOCO_NAMES:
+            raise ValueError(f"env {name!r} (MuJoCo through MJX) is not available yet")
+        raise ValueError(f"unknown env {name!r}; valid names: {', '.join(names())}")
+    return _REGISTRY[name]()

@@ -1,0 +1,1 @@
+"""MBRL-LDN in JAX."""

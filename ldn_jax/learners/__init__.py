@@ -1,0 +1,1 @@
+"""Learners: loss + update on a batch of (possibly masked) transitions."""
