@@ -1,0 +1,68 @@
+"""A fixed-capacity ring buffer of real transitions, on device."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+Array = jax.Array
+
+
+@struct.dataclass
+class Transitions:
+    """Model training data: inputs (obs, action) and targets (next_obs, reward)."""
+
+    obs: Array
+    """`[..., obs_size]`"""
+    action: Array
+    """`[..., action_size]` (one-hot for discrete actions)"""
+    next_obs: Array
+    """`[..., obs_size]`"""
+    reward: Array
+    """`[...]`"""
+
+
+@struct.dataclass
+class Buffer:
+    data: Transitions
+    """Each field `[capacity, ...]`."""
+    size: Array
+    """Transitions stored, int32, at most capacity."""
+    cursor: Array
+    """Where the next transition goes, int32."""
+
+    @property
+    def capacity(self) -> int:
+        return self.data.reward.shape[0]
+
+
+def buffer_init(capacity: int, obs_size: int, action_size: int) -> Buffer:
+    zeros = lambda *shape: jnp.zeros((capacity, *shape), jnp.float32)
+    data = Transitions(zeros(obs_size), zeros(action_size), zeros(obs_size), zeros())
+    return Buffer(data=data, size=jnp.zeros((), jnp.int32), cursor=jnp.zeros((), jnp.int32))
+
+
+def buffer_add(buffer: Buffer, batch: Transitions, valid: Array) -> Buffer:
+    """Append the valid transitions of a flat batch (fields `[N, ...]`, valid `[N]`).
+
+    Valid rows are packed in order behind the cursor; invalid rows are scattered out of
+    range and dropped, so a masked rollout costs no capacity.
+    """
+    valid = valid.astype(jnp.int32)
+    offset = jnp.cumsum(valid) - valid
+    slot = (buffer.cursor + offset) % buffer.capacity
+    slot = jnp.where(valid > 0, slot, buffer.capacity)
+    data = jax.tree.map(lambda d, b: d.at[slot].set(b, mode="drop"), buffer.data, batch)
+    added = valid.sum()
+    return Buffer(
+        data=data,
+        size=jnp.minimum(buffer.size + added, buffer.capacity),
+        cursor=(buffer.cursor + added) % buffer.capacity,
+    )
+
+
+def buffer_sample(buffer: Buffer, key: Array, batch_size: int) -> Transitions:
+    """Uniform draw with replacement from the stored transitions."""
+    index = jax.random.randint(key, (batch_size,), 0, jnp.maximum(buffer.size, 1))
+    return jax.tree.map(lambda d: d[index], buffer.data)

@@ -1,0 +1,29 @@
+"""Save and restore the whole batched `TrainState` with orbax."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import jax
+import orbax.checkpoint as ocp
+
+from ldn_jax.train import TrainState
+
+
+def _to_storable(state: TrainState) -> TrainState:
+    # Typed PRNG keys are stored as their raw uint32 data.
+    return state.replace(key=jax.random.key_data(state.key))
+
+
+def save(path: Path, state: TrainState) -> None:
+    """Write `state` to the directory `path` (orbax commits it atomically)."""
+    checkpointer = ocp.StandardCheckpointer()
+    checkpointer.save(Path(path).resolve(), _to_storable(state), force=True)
+    checkpointer.wait_until_finished()
+
+
+def restore(path: Path, like: TrainState) -> TrainState:
+    """Restore into the structure, shapes and dtypes of `like` (which may be abstract)."""
+    target = jax.eval_shape(_to_storable, like)
+    state = ocp.StandardCheckpointer().restore(Path(path).resolve(), target)
+    return state.replace(key=jax.random.wrap_key_data(state.key))

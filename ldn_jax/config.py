@@ -1,0 +1,201 @@
+"""Typed, frozen configuration: one dataclass per part, presets as data, one-line validation.
+
+The `paper` preset is the reading of the paper pinned down in `shared/PAPER.md`: the paper's
+network sizes and the public A3C CartPole code's constants it matches (gamma 0.9, RMSProp 1e-3,
+n-step 10, entropy 0.001, ReLU6 hidden layers, N(0, 0.1) weights, 8 workers).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+
+import envs
+
+ACTIVATIONS = ("linear", "relu", "relu6", "tanh")
+
+
+@dataclass(frozen=True)
+class Algorithm:
+    """What an algorithm name switches on. The algorithms share one code path."""
+
+    learner: str
+    """Which learner trains the actor-critic: "a2c" (synchronous A3C) or "ppo"."""
+    uses_model: bool
+    """Fit M1 on real transitions and train the agent on imagined episodes too."""
+    ld_stop: bool
+    """Stop imagined episodes by the learning-degree draw (MBRL-LDN)."""
+
+
+ALGORITHMS: dict[str, Algorithm] = {
+    "a2c": Algorithm("a2c", uses_model=False, ld_stop=False),
+    "a2c-model": Algorithm("a2c", uses_model=True, ld_stop=False),
+    "ldn": Algorithm("a2c", uses_model=True, ld_stop=True),
+    "a2c-ldn": Algorithm("a2c", uses_model=True, ld_stop=True),
+}
+
+THRESHOLDS = {"cartpole-v0": 150.0, "cartpole-v1": 150.0, "cartpole-v2": 100.0}
+"""The paper's Table 2/3 thresholds on the moving return."""
+
+
+@dataclass(frozen=True)
+class AgentConfig:
+    """The actor-critic and its learner."""
+
+    gamma: float = 0.9
+    """Discount factor."""
+    n_steps: int = 10
+    """Update the actor-critic every this many steps (and at episode end), n-step bootstrap."""
+    entropy_beta: float = 0.001
+    """Weight of the policy entropy bonus."""
+    actor_lr: float = 1e-3
+    """RMSProp learning rate of the actor."""
+    critic_lr: float = 1e-3
+    """RMSProp learning rate of the critic."""
+    rmsprop_decay: float = 0.9
+    """RMSProp decay of the squared-gradient average (TensorFlow 1's default)."""
+    rmsprop_eps: float = 1e-10
+    """RMSProp epsilon (TensorFlow 1's default)."""
+    actor_hidden: int = 200
+    """Hidden units of the actor's single hidden layer."""
+    critic_hidden: int = 100
+    """Hidden units of the critic's single hidden layer."""
+    activation: str = "relu6"
+    """Hidden activation of actor and critic."""
+    init_std: float = 0.1
+    """Standard deviation of the normal weight initialiser (biases start at zero)."""
+    terminal_reward: float | None = None
+    """If set, the training reward of a terminating step is replaced by this value (the
+    tutorial code uses -5). Reported returns are always the environment's own."""
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """The dynamics model M1, its frozen twin M0, and how M1 is fitted."""
+
+    hidden: int = 200
+    """Hidden units of each of the two model nets ((s, a) -> s' and s' -> r)."""
+    activation: str = "linear"
+    """Hidden activation; the paper's nets have none ("linear")."""
+    predict_delta: bool = False
+    """Predict s' - s instead of s'."""
+    init_std: float = 0.1
+    """Standard deviation of the normal weight initialiser of M1 (and so of M0)."""
+    lr: float = 1e-3
+    """Adam learning rate of M1."""
+    updates: int = 100
+    """Minibatch gradient steps on M1 per iteration (the paper: 100 per episode)."""
+    batch_size: int = 64
+    """Minibatch size of each model step, drawn uniformly from the real buffer."""
+    buffer_capacity: int = 50_000
+    """Real transitions kept per seed and K (a ring buffer: the oldest are overwritten)."""
+
+
+@dataclass(frozen=True)
+class Config:
+    """One training run: an env, an algorithm, and every seed x K it runs in one program."""
+
+    env: str = "cartpole-v2"
+    """Environment name (see `envs.names()`)."""
+    algo: str = "ldn"
+    """Algorithm: one of `ALGORITHMS`."""
+    preset: str = "paper"
+    """The preset these values started from (recorded for provenance)."""
+    seeds: int = 3
+    """Number of seeds, vmapped; seed i uses PRNG key i."""
+    k: tuple[float, ...] = (1.0,)
+    """Learning-degree gains K (eq. 6), vmapped; K=1 is eq. 4."""
+    episodes: int = 400
+    """Real episodes per seed and K, summed over workers."""
+    workers: int = 8
+    """Synchronous workers (vmapped); one real and one imagined episode each per iteration."""
+    threshold: float | None = None
+    """Moving-return threshold for "episodes to threshold"; None: the env's paper value."""
+    moving_decay: float = 0.99
+    """Moving return m <- decay * m + (1 - decay) * R, started at the first return."""
+    eval_episodes: int = 10
+    """Episodes of the deterministic policy evaluated at the end of training."""
+    chunk_iterations: int = 5
+    """Iterations per compiled chunk: the host logs and checkpoints between chunks."""
+    agent: AgentConfig = field(default_factory=AgentConfig)
+    model: ModelConfig = field(default_factory=ModelConfig)
+
+    @property
+    def algorithm(self) -> Algorithm:
+        return ALGORITHMS[self.algo]
+
+    @property
+    def iterations(self) -> int:
+        """Iterations needed for `episodes` real episodes, rounded up to whole chunks."""
+        per_chunk = self.workers * self.chunk_iterations
+        return math.ceil(self.episodes / per_chunk) * self.chunk_iterations
+
+    @property
+    def resolved_threshold(self) -> float | None:
+        return self.threshold if self.threshold is not None else THRESHOLDS.get(self.env)
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> Config:
+        data = dict(data)
+        agent = AgentConfig(**data.pop("agent", {}))
+        model = ModelConfig(**data.pop("model", {}))
+        data["k"] = tuple(data.get("k", (1.0,)))
+        return cls(**data, agent=agent, model=model)
+
+
+PRESETS: dict[str, dict] = {
+    "paper": {},
+    # The tutorial code's -5 terminal reward, which speeds up CartPole learning at gamma 0.9.
+    "tutorial": {"agent": {"terminal_reward": -5.0}},
+    # Nonlinear dynamics model predicting state deltas.
+    "mlp-model": {"model": {"activation": "relu", "predict_delta": True}},
+}
+
+
+def from_preset(name: str, **overrides) -> Config:
+    """Build a config from a preset plus top-level overrides (agent/model as dicts)."""
+    if name not in PRESETS:
+        raise ValueError(f"unknown preset {name!r}; valid presets: {', '.join(PRESETS)}")
+    preset = PRESETS[name]
+    agent = dict(preset.get("agent", {}), **overrides.pop("agent", {}))
+    model = dict(preset.get("model", {}), **overrides.pop("model", {}))
+    top = {k: v for k, v in preset.items() if k not in ("agent", "model")}
+    return Config(
+        preset=name, **top, **overrides, agent=AgentConfig(**agent), model=ModelConfig(**model)
+    )
+
+
+def validate(config: Config) -> Config:
+    """Raise ValueError with a one-line message for the first impossible value."""
+    if config.env not in envs.names():
+        envs.make(config.env)  # raises the registry's one-line error
+    if config.algo not in ALGORITHMS:
+        raise ValueError(f"unknown algo {config.algo!r}; valid algos: {', '.join(ALGORITHMS)}")
+    checks = [
+        (config.seeds >= 1, f"seeds must be >= 1, got {config.seeds}"),
+        (len(config.k) >= 1, "k needs at least one value"),
+        (all(k > 0 and math.isfinite(k) for k in config.k), f"every K must be > 0: {config.k}"),
+        (len(set(config.k)) == len(config.k), f"K values must be distinct: {config.k}"),
+        (config.episodes >= 1, f"episodes must be >= 1, got {config.episodes}"),
+        (config.workers >= 1, f"workers must be >= 1, got {config.workers}"),
+        (0 < config.moving_decay < 1, "moving_decay must be in (0, 1)"),
+        (config.eval_episodes >= 1, "eval_episodes must be >= 1"),
+        (config.chunk_iterations >= 1, "chunk_iterations must be >= 1"),
+        (0 < config.agent.gamma <= 1, f"gamma must be in (0, 1], got {config.agent.gamma}"),
+        (config.agent.n_steps >= 1, "n_steps must be >= 1"),
+        (config.agent.actor_lr > 0 and config.agent.critic_lr > 0, "learning rates must be > 0"),
+        (config.agent.activation in ACTIVATIONS, f"activation must be one of {ACTIVATIONS}"),
+        (config.model.activation in ACTIVATIONS, f"model activation must be one of {ACTIVATIONS}"),
+        (config.model.lr > 0, "model lr must be > 0"),
+        (config.model.updates >= 0, "model updates must be >= 0"),
+        (config.model.batch_size >= 1, "model batch_size must be >= 1"),
+        (config.model.buffer_capacity >= 1, "buffer_capacity must be >= 1"),
+    ]
+    for ok, message in checks:
+        if not ok:
+            raise ValueError(message)
+    return config

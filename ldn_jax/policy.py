@@ -1,0 +1,48 @@
+"""Trained policies for use outside JAX."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+import jax
+import numpy as np
+
+from ldn_jax import checkpoint
+from ldn_jax.config import Config
+from ldn_jax.train import Trainer
+
+FINAL_CHECKPOINT = "final"
+
+
+def load_policy(
+    run_dir: str | Path, seed: int = 0, k: float | None = None
+) -> Callable[[np.ndarray], int | np.ndarray]:
+    """The greedy policy of one seed and K of a finished run.
+
+    Returns `act(obs)`: a numpy observation in, a Python int (discrete actions) out.
+    `k=None` picks the run's only K, or its first one.
+    """
+    run_dir = Path(run_dir)
+    config = Config.from_dict(json.loads((run_dir / "config.json").read_text()))
+    if not 0 <= seed < config.seeds:
+        raise ValueError(f"seed {seed} not in this run (it has seeds 0..{config.seeds - 1})")
+    k_index = 0 if k is None else _index_of(config.k, k)
+    trainer = Trainer(config)
+    like = jax.eval_shape(trainer.init_batch)
+    state = checkpoint.restore(run_dir / "checkpoints" / FINAL_CHECKPOINT, like)
+    params = jax.tree.map(lambda x: x[k_index, seed], state.learner.params)
+    greedy = jax.jit(trainer.learner.greedy)
+
+    def act(obs: np.ndarray) -> int:
+        return int(greedy(params, np.asarray(obs, np.float32)))
+
+    return act
+
+
+def _index_of(values: tuple[float, ...], k: float) -> int:
+    for i, value in enumerate(values):
+        if np.isclose(value, k):
+            return i
+    raise ValueError(f"K={k} not in this run (it has K in {list(values)})")

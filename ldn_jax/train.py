@@ -1,0 +1,237 @@
+"""The training iteration (Algorithm 1, synchronous reading) and its compiled chunks.
+
+One iteration, per seed and K:
+1. `real_stage`: each of W workers plays one real episode; the learner updates every n steps.
+2. `model_stage`: M1 takes `model.updates` minibatch steps on the real buffer.
+3. `imagine_stage`: each worker plays one episode in M1 from a fresh initial state.
+`a2c` runs stage 1 only; `a2c-model` runs all three without the LD stop; `ldn` with it.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+import envs
+from ldn_jax.buffer import Buffer, Transitions, buffer_add, buffer_init
+from ldn_jax.config import Config
+from ldn_jax.dynamics import Dynamics, ModelState
+from ldn_jax.imagination import model_world
+from ldn_jax.learners.a2c import A2C
+from ldn_jax.learners.base import LearnerState
+from ldn_jax.rollout import Episodes, play_episodes
+
+Array = jax.Array
+
+
+@struct.dataclass
+class TrainState:
+    """Everything one seed x K run carries from one iteration to the next."""
+
+    learner: LearnerState
+    model: ModelState | None
+    """M1, frozen M0 and M1's optimiser; None for model-free algorithms."""
+    buffer: Buffer | None
+    """Real transitions for fitting M1; None for model-free algorithms."""
+    moving_return: Array
+    """NaN until the first episode completes."""
+    episodes: Array
+    env_steps: Array
+    imagined_steps: Array
+    iteration: Array
+    key: Array
+
+
+class Trainer:
+    """Builds the pure training functions for one config; holds no training state."""
+
+    def __init__(self, config: Config):
+        self.config = config
+        self.env, self.env_params = envs.make(config.env)
+        self.obs_size = self.env.observation_size(self.env_params)
+        self.n_actions = self.env.action_spec(self.env_params).size
+        self.max_steps = self.env_params.max_steps
+        self.learner = A2C(config.agent, self.obs_size, self.n_actions)
+        self.dynamics = (
+            Dynamics(config.model, self.obs_size, self.n_actions)
+            if config.algorithm.uses_model
+            else None
+        )
+
+    # -- state -----------------------------------------------------------------------------
+
+    def init_state(self, key: Array) -> TrainState:
+        key, k_learner, k_model = jax.random.split(key, 3)
+        model = buffer = None
+        if self.dynamics is not None:
+            model = self.dynamics.init(k_model)
+            buffer = buffer_init(self.config.model.buffer_capacity, self.obs_size, self.n_actions)
+        zero = jnp.zeros((), jnp.int32)
+        return TrainState(
+            learner=self.learner.init(k_learner),
+            model=model,
+            buffer=buffer,
+            moving_return=jnp.full((), jnp.nan, jnp.float32),
+            episodes=zero,
+            env_steps=zero,
+            imagined_steps=zero,
+            iteration=zero,
+            key=key,
+        )
+
+    # -- stages ----------------------------------------------------------------------------
+
+    def _reset(self, key: Array) -> tuple[Array, object]:
+        keys = jax.random.split(key, self.config.workers)
+        return jax.vmap(self.env.reset, (0, None))(keys, self.env_params)
+
+    def _env_world(self, key: Array, world, obs: Array, action: Array):
+        keys = jax.random.split(key, action.shape[0])
+        step = jax.vmap(self.env.step, (0, 0, 0, None))
+        next_obs, world, reward, terminated, truncated, _ = step(
+            keys, world, action, self.env_params
+        )
+        return next_obs, world, reward, terminated, truncated, {}
+
+    def real_stage(self, state: TrainState, key: Array) -> tuple[TrainState, Episodes]:
+        k_reset, k_play = jax.random.split(key)
+        obs, env_state = self._reset(k_reset)
+        learner, episodes = play_episodes(
+            k_play, state.learner, self.learner, self._env_world, obs, env_state, self.max_steps
+        )
+        return state.replace(learner=learner), episodes
+
+    def model_stage(
+        self, state: TrainState, episodes: Episodes, key: Array
+    ) -> tuple[TrainState, Array]:
+        steps = episodes.steps
+        flat = lambda x: x.reshape((-1, *x.shape[2:]))
+        batch = Transitions(
+            obs=flat(steps.obs),
+            action=flat(jax.nn.one_hot(steps.action, self.n_actions)),
+            next_obs=flat(steps.next_obs),
+            reward=flat(steps.reward),
+        )
+        buffer = buffer_add(state.buffer, batch, flat(steps.weight) > 0)
+        model, loss = self.dynamics.fit(state.model, buffer, key)
+        return state.replace(model=model, buffer=buffer), loss
+
+    def imagine_stage(self, state: TrainState, key: Array, k: Array) -> tuple[TrainState, Episodes]:
+        k_reset, k_play = jax.random.split(key)
+        obs, _ = self._reset(k_reset)
+        world = model_world(
+            self.dynamics,
+            state.model,
+            lambda o: self.env.is_terminal(o, self.env_params),
+            self.n_actions,
+            k,
+            self.config.algorithm.ld_stop,
+        )
+        learner, episodes = play_episodes(
+            k_play, state.learner, self.learner, world, obs, None, self.max_steps
+        )
+        return state.replace(learner=learner), episodes
+
+    # -- one iteration and a chunk of them -------------------------------------------------
+
+    def iteration(self, state: TrainState, k: Array) -> tuple[TrainState, dict]:
+        """One iteration of Algorithm 1 for every worker; returns per-iteration metrics."""
+        key, k_real, k_model, k_imagine = jax.random.split(state.key, 4)
+        state, real = self.real_stage(state, k_real)
+
+        # The moving return advances over episodes in completion order (shorter first,
+        # ties by worker), as the paper's global counter sees them.
+        lengths, returns = real.lengths, real.returns
+        order = jnp.argsort(lengths, stable=True)
+        decay = self.config.moving_decay
+
+        def advance(m, r):
+            m = jnp.where(jnp.isnan(m), r, decay * m + (1.0 - decay) * r)
+            return m, m
+
+        moving, moving_after = jax.lax.scan(advance, state.moving_return, returns[order])
+        metrics = {
+            "episode_return": returns.mean(),
+            "returns": returns[order],
+            "lengths": lengths[order],
+            "moving_after": moving_after,
+            **{f"real_{name}": value for name, value in real.losses.items()},
+        }
+        imagined_steps = jnp.zeros((), jnp.int32)
+        if self.dynamics is not None:
+            state, metrics["model_loss"] = self.model_stage(state, real, k_model)
+            state, imagined = self.imagine_stage(state, k_imagine, k)
+            weight = imagined.steps.weight
+            imagined_steps = weight.sum().astype(jnp.int32)
+            metrics["ld_mean"] = (imagined.extras["ld"] * weight).sum() / weight.sum()
+            metrics["imagined_length"] = imagined.lengths.mean()
+            metrics["imagined_return"] = imagined.returns.mean()
+            metrics.update({f"imagined_{n}": v for n, v in imagined.losses.items()})
+
+        state = state.replace(
+            moving_return=moving,
+            episodes=state.episodes + self.config.workers,
+            env_steps=state.env_steps + lengths.sum(),
+            imagined_steps=state.imagined_steps + imagined_steps,
+            iteration=state.iteration + 1,
+            key=key,
+        )
+        metrics.update(
+            moving_return=moving,
+            episodes=state.episodes,
+            env_steps=state.env_steps,
+            imagined_steps=state.imagined_steps,
+            iteration=state.iteration,
+        )
+        return state, metrics
+
+    def train_chunk(self, state: TrainState, k: Array) -> tuple[TrainState, dict]:
+        """`config.chunk_iterations` iterations; metrics stacked `[N, ...]`."""
+        return jax.lax.scan(
+            lambda s, _: self.iteration(s, k), state, length=self.config.chunk_iterations
+        )
+
+    def evaluate(self, state: TrainState, key: Array) -> Array:
+        """Mean return of the greedy policy over `config.eval_episodes` real episodes."""
+        n = self.config.eval_episodes
+        obs, env_state = jax.vmap(self.env.reset, (0, None))(
+            jax.random.split(key, n), self.env_params
+        )
+        step = jax.vmap(self.env.step, (None, 0, 0, None))
+
+        def body(carry, _):
+            obs, env_state, alive, total = carry
+            action = self.learner.greedy(state.learner.params, obs)
+            obs, env_state, reward, terminated, truncated, _ = step(
+                key, env_state, action, self.env_params
+            )
+            total = total + reward * alive
+            alive = alive & ~(terminated | truncated)
+            return (obs, env_state, alive, total), None
+
+        init = (obs, env_state, jnp.ones((n,), bool), jnp.zeros((n,)))
+        (_, _, _, total), _ = jax.lax.scan(body, init, length=self.max_steps)
+        return total.mean()
+
+    # -- seeds x K -------------------------------------------------------------------------
+
+    def init_batch(self) -> TrainState:
+        """States `[K, S]`: seed i gets key i for every K (common random numbers)."""
+        keys = jax.vmap(jax.random.key)(jnp.arange(self.config.seeds))
+        states = jax.vmap(self.init_state)(keys)
+        n_k = len(self.config.k)
+        return jax.tree.map(lambda x: jnp.broadcast_to(x, (n_k, *x.shape)), states)
+
+    def k_values(self) -> Array:
+        return jnp.asarray(self.config.k, jnp.float32)
+
+    def batched_chunk(self):
+        """`(states [K, S], k [K]) -> (states, metrics [K, S, N, ...])`, jitted."""
+        per_seed = jax.vmap(self.train_chunk, in_axes=(0, None))
+        return jax.jit(jax.vmap(per_seed, in_axes=(0, 0)), donate_argnums=0)
+
+    def batched_evaluate(self):
+        """`(states [K, S], key) -> eval returns [K, S]`, jitted."""
+        per_seed = jax.vmap(self.evaluate, in_axes=(0, None))
+        return jax.jit(jax.vmap(per_seed, in_axes=(0, None)))
