@@ -108,7 +108,7 @@ def metric_lines(config: Config, metrics: dict, wall_seconds: float) -> list[str
     for ki in range(n_k):
         for seed in range(seeds):
             for i in range(n_iter):
-                at = lambda name: metrics[name][ki, seed, i]
+                at = lambda name, index=(ki, seed, i): metrics[name][index]
                 line = {
                     "iteration": int(at("iteration")),
                     "seed": seed,

@@ -13,7 +13,7 @@ import jax
 import jax.numpy as jnp
 
 from ldn_jax.dynamics import Dynamics, ModelState
-from ldn_jax.learning_degree import deviation, learning_degree, stop_draw
+from ldn_jax.learning_degree import deviation, learning_degree, stop_draw, stop_probability
 from ldn_jax.rollout import WorldStep
 
 Array = jax.Array
@@ -38,7 +38,10 @@ def model_world(
             jnp.concatenate([next_obs_m0, reward_m0[..., None]], axis=-1),
         )
         ld = learning_degree(sigma2, k)
-        stop = stop_draw(key, ld) if ld_stop else jnp.zeros_like(ld, bool)
+        if ld_stop:
+            stop = stop_draw(key, stop_probability(sigma2, k))
+        else:
+            stop = jnp.zeros_like(ld, bool)
         terminated = is_terminal(next_obs)
         return next_obs, world, reward, terminated, stop, {"ld": ld}
 

@@ -22,10 +22,20 @@ def deviation(pred_m1: Array, pred_m0: Array) -> Array:
 
 
 def learning_degree(sigma2: Array, k: Array | float = 1.0) -> Array:
-    """Eq. 4 and 6: LD = 2 sigmoid(K sigma2) - 1, in [0, 1) for sigma2 >= 0."""
-    return 2.0 * jax.nn.sigmoid(k * sigma2) - 1.0
+    """Eq. 4 and 6: LD = 2 sigmoid(K sigma2) - 1, in [0, 1) for sigma2 >= 0.
+
+    Computed as the identical tanh(K sigma2 / 2), which keeps its precision near 0 where
+    2 sigmoid(x) - 1 cancels. In float32 LD rounds to 1 above K sigma2 ~ 17; draws use
+    `stop_probability`, which stays exact there.
+    """
+    return jnp.tanh(0.5 * k * sigma2)
 
 
-def stop_draw(key: Array, ld: Array) -> Array:
-    """Eq. 5: stop with probability 1 - LD (u ~ U[0, 1), stop when u < 1 - LD)."""
-    return jax.random.uniform(key, ld.shape) < 1.0 - ld
+def stop_probability(sigma2: Array, k: Array | float = 1.0) -> Array:
+    """Eq. 5: P(stop) = 1 - LD = 2 sigmoid(-K sigma2), computed without cancellation."""
+    return 2.0 * jax.nn.sigmoid(-k * sigma2)
+
+
+def stop_draw(key: Array, p_stop: Array) -> Array:
+    """Stop where u < P(stop), u ~ U[0, 1): with P(stop) = 1 - LD this is eq. 5."""
+    return jax.random.uniform(key, p_stop.shape) < p_stop

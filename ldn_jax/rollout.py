@@ -103,8 +103,7 @@ def play_episodes(
     def segment(carry: EpisodeCarry, key: Array):
         carry, (transitions, extras) = jax.lax.scan(step, carry, jax.random.split(key, n_steps))
         learner_state, losses = learner.update(carry.learner, transitions)
-        live = transitions.weight.sum() > 0
-        return carry.replace(learner=learner_state), (transitions, extras, losses, live)
+        return carry.replace(learner=learner_state), (transitions, extras, losses)
 
     carry = EpisodeCarry(
         learner=learner_state,
@@ -113,11 +112,28 @@ def play_episodes(
         alive=jnp.ones((workers,), bool),
         time=jnp.zeros((), jnp.int32),
     )
-    carry, (steps, extras, losses, live) = jax.lax.scan(
-        segment, carry, jax.random.split(key, n_segments)
-    )
+    keys = jax.random.split(key, n_segments)
+    # The loop over segments stops once every worker's episode has ended. The mask alone
+    # defines the result: a segment with no live step changes nothing (`keep_if_any`), so
+    # skipping it is pure savings. Under vmap the loop runs until the whole batch is done.
+    out_shape = jax.eval_shape(segment, carry, keys[0])[1]
+    outputs = jax.tree.map(lambda x: jnp.zeros((n_segments, *x.shape), x.dtype), out_shape)
+
+    def cond(loop):
+        index, carry, _ = loop
+        return (index < n_segments) & carry.alive.any()
+
+    def body(loop):
+        index, carry, outputs = loop
+        carry, out = segment(carry, keys[index])
+        outputs = jax.tree.map(
+            lambda buf, x: jax.lax.dynamic_update_index_in_dim(buf, x, index, 0), outputs, out
+        )
+        return index + 1, carry, outputs
+
+    _, carry, (steps, extras, losses) = jax.lax.while_loop(cond, body, (0, carry, outputs))
+    live = (steps.weight.sum(axis=(1, 2)) > 0).astype(jnp.float32)
     flat = lambda x: x.reshape((n_segments * n_steps, *x.shape[2:]))
-    live = live.astype(jnp.float32)
     losses = jax.tree.map(lambda x: (x * live).sum() / jnp.maximum(live.sum(), 1.0), losses)
     episodes = Episodes(
         steps=jax.tree.map(flat, steps), extras=jax.tree.map(flat, extras), losses=losses

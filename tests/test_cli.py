@@ -1,0 +1,88 @@
+"""The CLI: a tiny run writes every run-dir file; bad input exits 2 with one line."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ldn_jax import load_policy
+
+ROOT = Path(__file__).resolve().parents[1]
+RUN = [sys.executable, str(ROOT / "experiments" / "run.py")]
+
+
+def _run(*args, timeout=300):
+    return subprocess.run([*RUN, *args], capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("run") / "ldn"
+    args = ["--env", "cartpole-v0", "--algo", "ldn", "--seeds", "2", "--k", "0.5,2"]
+    result = _run(*args, "--episodes", "16", "--workers", "4", "--chunk", "2", "--out", str(out))
+    assert result.returncode == 0, result.stderr
+    assert "summary.json" in result.stdout
+    return out
+
+
+def test_run_dir_files_and_fields(run_dir):
+    for name in ("config.json", "metrics.jsonl", "summary.json", "curves.png"):
+        assert (run_dir / name).stat().st_size > 0, name
+    assert (run_dir / "checkpoints" / "final").is_dir()
+    config = json.loads((run_dir / "config.json").read_text())
+    assert config["k"] == [0.5, 2.0] and config["seeds"] == 2 and config["algo"] == "ldn"
+    lines = [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
+    assert len(lines) == 2 * 2 * 4  # K x seeds x iterations
+    fields = {
+        "iteration", "seed", "k", "episodes", "env_steps", "imagined_steps", "episode_return",
+        "moving_return", "ld_mean", "losses", "wall_seconds",
+    }  # fmt: skip
+    assert all(set(line) == fields for line in lines)
+    assert {(line["seed"], line["k"]) for line in lines} == {(0, 0.5), (1, 0.5), (0, 2), (1, 2)}
+    assert lines[-1]["episodes"] == 16 and 0 <= lines[-1]["ld_mean"] < 1
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert {"env", "algo", "threshold", "compile_seconds", "train_seconds"} <= set(summary)
+    assert summary["threshold"] == 150.0 and summary["env_steps_per_second"] > 0
+    run_fields = {
+        "seed", "k", "episodes_to_threshold", "env_steps_to_threshold", "seconds_to_threshold",
+        "final_moving_return", "eval_return",
+    }  # fmt: skip
+    assert len(summary["runs"]) == 4 and all(set(r) == run_fields for r in summary["runs"])
+
+
+def test_load_policy_returns_python_ints(run_dir):
+    act = load_policy(run_dir, seed=1, k=2.0)
+    rng = np.random.default_rng(0)
+    actions = [act(rng.uniform(-0.05, 0.05, 4).astype(np.float32)) for _ in range(20)]
+    assert all(type(a) is int and a in (0, 1) for a in actions)
+    obs = np.array([0.01, 0.0, 0.02, 0.1], np.float32)
+    assert act(obs) == act(obs)
+    with pytest.raises(ValueError, match="K=3"):
+        load_policy(run_dir, k=3.0)
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["--env", "pong"], "unknown env 'pong'"),
+        (["--algo", "dqn"], "unknown algo 'dqn'"),
+        (["--k", "0,1"], "every K must be > 0"),
+        (["--k", "-1"], "every K must be > 0"),
+        (["--seeds", "0"], "seeds must be >= 1"),
+        (["--seeds", "two"], "invalid int value"),
+        (["--out", "/proc/forbidden/run"], "cannot write to --out"),
+    ],
+)
+def test_bad_input_exits_2_with_one_line(args, needle):
+    result = _run(*args, timeout=60)
+    assert result.returncode == 2
+    assert result.stderr.count("\n") == 1 and needle in result.stderr, result.stderr
+    assert "Traceback" not in result.stderr
+
+
+def test_existing_run_is_never_overwritten(run_dir):
+    result = _run("--out", str(run_dir), timeout=60)
+    assert result.returncode == 2 and "already holds a run" in result.stderr

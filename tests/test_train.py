@@ -1,0 +1,176 @@
+"""The episode player's masks, imagination's stop semantics, and the trainer's invariants."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from ldn_jax.config import AgentConfig, ModelConfig, from_preset
+from ldn_jax.dynamics import Dynamics
+from ldn_jax.imagination import model_world
+from ldn_jax.learners.a2c import A2C
+from ldn_jax.rollout import play_episodes
+from ldn_jax.train import Trainer
+
+
+def _scripted_world(end_at, terminal):
+    """Worker w's episode ends after `end_at[w]` steps, terminated or truncated."""
+    end_at, terminal = jnp.asarray(end_at), jnp.asarray(terminal)
+
+    def step(key, time, obs, action):
+        time = time + 1
+        ends = time >= end_at
+        return obs + 1.0, time, jnp.ones_like(obs[:, 0]), ends & terminal, ends & ~terminal, {}
+
+    return step
+
+
+def test_masks_end_episodes_and_stop_learning():
+    learner = A2C(AgentConfig(n_steps=4), obs_size=2, n_actions=2)
+    state = learner.init(jax.random.key(0))
+    world = _scripted_world([3, 6, 1], [True, False, False])
+    obs = jnp.zeros((3, 2))
+    _, episodes = play_episodes(
+        jax.random.key(1), state, learner, world, obs, jnp.zeros(3, jnp.int32), max_steps=20
+    )
+    weight = np.asarray(episodes.steps.weight)
+    np.testing.assert_array_equal(weight.sum(0), [3, 6, 1])
+    for w, n in enumerate([3, 6, 1]):
+        assert (weight[:n, w] == 1).all() and (weight[n:, w] == 0).all()
+    terminated, done = np.asarray(episodes.steps.terminated), np.asarray(episodes.steps.done)
+    assert terminated[2, 0] and done[2, 0]  # terminal: no bootstrap
+    assert not terminated[5, 1] and done[5, 1]  # truncation: bootstraps
+    np.testing.assert_array_equal(np.asarray(episodes.lengths), [3, 6, 1])
+    # The loop stopped at the segment where the last worker ended: later rows are untouched.
+    assert (weight[8:] == 0).all()
+
+
+def test_max_steps_truncates():
+    learner = A2C(AgentConfig(n_steps=3), obs_size=2, n_actions=2)
+    world = _scripted_world([100, 100], [True, True])
+    _, episodes = play_episodes(
+        jax.random.key(1),
+        learner.init(jax.random.key(0)),
+        learner,
+        world,
+        jnp.zeros((2, 2)),
+        jnp.zeros(2, jnp.int32),
+        max_steps=7,
+    )
+    np.testing.assert_array_equal(np.asarray(episodes.lengths), [7, 7])
+    done = np.asarray(episodes.steps.done)
+    assert done[6].all() and not np.asarray(episodes.steps.terminated).any()
+
+
+def test_fully_masked_segment_leaves_learner_bitwise_unchanged():
+    learner = A2C(AgentConfig(), obs_size=4, n_actions=2)
+    state = learner.init(jax.random.key(0))
+    world = _scripted_world([1, 1], [True, True])
+    # One live step, then nothing: the update of the segment holding it is the only change.
+    new, _ = play_episodes(
+        jax.random.key(1), state, learner, world, jnp.zeros((2, 4)), jnp.zeros(2, jnp.int32), 30
+    )
+    segment = jax.tree.map(
+        lambda x: x[:10],
+        play_episodes(
+            jax.random.key(1), state, learner, world, jnp.zeros((2, 4)), jnp.zeros(2, jnp.int32), 30
+        )[1].steps,
+    )
+    expected, _ = learner.update(state, segment)
+    for a, b in zip(jax.tree.leaves(new), jax.tree.leaves(expected), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    dead = segment.replace(weight=jnp.zeros_like(segment.weight))
+    same, _ = learner.update(state, dead)
+    for a, b in zip(jax.tree.leaves(same), jax.tree.leaves(state), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
+def _imagine(ld_stop, trained):
+    dynamics = Dynamics(ModelConfig(), obs_size=4, action_size=2)
+    model = dynamics.init(jax.random.key(0))
+    if trained:  # move M1 far from M0: LD near 1
+        model = model.replace(params=jax.tree.map(lambda p: p + 3.0, model.params))
+    learner = A2C(AgentConfig(), obs_size=4, n_actions=2)
+    never_terminal = lambda obs: jnp.zeros(obs.shape[:-1], bool)
+    world = model_world(dynamics, model, never_terminal, 2, jnp.float32(1.0), ld_stop)
+    obs = jax.random.uniform(jax.random.key(2), (64, 4), minval=-0.05, maxval=0.05)
+    _, episodes = jax.jit(play_episodes, static_argnums=(2, 3, 6))(
+        jax.random.key(3), learner.init(jax.random.key(4)), learner, world, obs, None, 50
+    )
+    return episodes
+
+
+def test_untrained_model_stops_imagination_at_once():
+    episodes = _imagine(ld_stop=True, trained=False)
+    # M1 == M0: LD = 0, P(stop) = 1, so every imagined episode is one truncated step.
+    np.testing.assert_array_equal(np.asarray(episodes.lengths), 1)
+    steps = episodes.steps
+    assert np.asarray(steps.done[0]).all() and not np.asarray(steps.terminated).any()
+    np.testing.assert_array_equal(np.asarray(episodes.extras["ld"][0]), 0.0)
+    assert (np.asarray(steps.weight[1:]) == 0).all()
+
+
+def test_ld_stop_off_runs_to_the_limit_and_trained_model_runs_longer():
+    np.testing.assert_array_equal(np.asarray(_imagine(ld_stop=False, trained=False).lengths), 50)
+    trained = _imagine(ld_stop=True, trained=True)
+    assert np.asarray(trained.lengths).mean() > 5
+    weight = np.asarray(trained.steps.weight)
+    lengths = np.asarray(trained.lengths)
+    for w in range(weight.shape[1]):  # no weight after the stop
+        assert (weight[: lengths[w], w] == 1).all() and (weight[lengths[w] :, w] == 0).all()
+
+
+def _config(**overrides):
+    base = dict(env="cartpole-v0", algo="ldn", seeds=2, episodes=16, workers=4, chunk_iterations=2)
+    base.update(overrides)
+    return from_preset("paper", **base)
+
+
+def _run_chunks(trainer, states, chunks=2):
+    fn = trainer.batched_chunk()
+    history = []
+    for _ in range(chunks):
+        states, metrics = fn(states, trainer.k_values())
+        history.append(jax.device_get(metrics))
+    return states, history
+
+
+def test_m0_is_bitwise_frozen_and_m1_moves():
+    trainer = Trainer(_config())
+    initial = jax.device_get(trainer.init_batch())
+    final, _ = _run_chunks(trainer, trainer.init_batch())
+    leaves = lambda tree: jax.tree.leaves(jax.device_get(tree))
+    for a, b in zip(leaves(final.model.frozen), leaves(initial.model.frozen), strict=True):
+        np.testing.assert_array_equal(a, b)
+    moved = [
+        not np.array_equal(a, b)
+        for a, b in zip(leaves(final.model.params), leaves(initial.model.params), strict=True)
+    ]
+    assert all(moved)
+    assert int(final.imagined_steps.min()) > 0
+
+
+@pytest.mark.parametrize("algo", ["a2c", "ldn"])
+def test_same_seed_gives_bitwise_identical_metrics(algo):
+    trainer = Trainer(_config(algo=algo, k=(1.0, 2.0) if algo == "ldn" else (1.0,)))
+    _, first = _run_chunks(trainer, trainer.init_batch())
+    _, second = _run_chunks(trainer, trainer.init_batch())
+    for m1, m2 in zip(first, second, strict=True):
+        for name in m1:
+            np.testing.assert_array_equal(m1[name], m2[name], err_msg=name)
+
+
+def test_vmapped_seeds_equal_seeds_run_one_by_one():
+    config = _config(seeds=3)
+    trainer = Trainer(config)
+    _, batched = _run_chunks(trainer, trainer.init_batch())
+    single = jax.jit(trainer.train_chunk)
+    k = trainer.k_values()[0]
+    for seed in range(config.seeds):
+        state = trainer.init_state(jax.random.key(seed))
+        for chunk in batched:
+            state, metrics = single(state, k)
+            for name, value in jax.device_get(metrics).items():
+                np.testing.assert_allclose(
+                    value, chunk[name][0, seed], rtol=1e-5, atol=1e-6, err_msg=name
+                )
