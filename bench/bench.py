@@ -16,6 +16,8 @@ import jax
 import jax.numpy as jnp
 
 import envs
+from ldn_jax.config import from_preset
+from ldn_jax.train import Trainer
 
 
 def _timed(fn, *args):
@@ -71,9 +73,40 @@ def cartpole_env_steps(n_envs: int, auto_reset: bool, steps: int = 1000) -> dict
     }
 
 
+def training(algo: str, seeds: int = 10, episodes: int = 800, env: str = "cartpole-v1") -> dict:
+    """Train from scratch (paper preset) and count real and imagined steps per wall second.
+
+    The figure covers the whole run, the early iterations with short episodes included.
+    """
+    config = from_preset("paper", env=env, algo=algo, seeds=seeds, episodes=episodes)
+    trainer = Trainer(config)
+    states, k = trainer.init_batch(), trainer.k_values()
+    start = time.perf_counter()
+    chunk = trainer.batched_chunk().lower(states, k).compile()
+    compile_s = time.perf_counter() - start
+    start = time.perf_counter()
+    for _ in range(config.iterations // config.chunk_iterations):
+        states, _ = chunk(states, k)
+    jax.block_until_ready(states)
+    seconds = time.perf_counter() - start
+    env_steps = int(states.env_steps.sum())
+    imagined = int(states.imagined_steps.sum())
+    return {
+        "algo": algo,
+        "env": env,
+        "seeds": seeds,
+        "episodes_per_seed": config.iterations * config.workers,
+        "compile_s": round(compile_s, 2),
+        "train_s": round(seconds, 2),
+        "env_steps_per_s": round(env_steps / seconds),
+        "imagined_steps_per_s": round(imagined / seconds),
+        "final_moving_return_mean": round(float(states.moving_return.mean()), 1),
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--sections", default="env", help="comma list: env")
+    parser.add_argument("--sections", default="env,train", help="comma list: env, train")
     args = parser.parse_args()
     sections = set(args.sections.split(","))
     result: dict = {
@@ -87,6 +120,8 @@ def main() -> None:
             for auto_reset in (False, True)
             for n in (1, 64, 1024, 8192)
         ]
+    if "train" in sections:
+        result["training"] = [training(algo) for algo in ("a2c", "a2c-model", "ldn")]
     print(json.dumps(result))
 
 

@@ -43,7 +43,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--algo", default="ldn", help=f"one of: {', '.join(ALGORITHMS)}")
     p.add_argument("--seeds", type=int, default=5, help="number of vmapped seeds (0..N-1)")
     p.add_argument("--k", default="0.5,1,2", help="comma-separated learning-degree gains K")
-    p.add_argument("--episodes", type=int, default=400, help="real episodes per seed and K")
+    p.add_argument("--episodes", type=int, default=1600, help="real episodes per seed and K")
     p.add_argument("--workers", type=int, default=None, help="synchronous workers (default 8)")
     p.add_argument("--preset", default="paper", help=f"one of: {', '.join(PRESETS)}")
     p.add_argument("--threshold", type=float, default=None, help="moving-return threshold")

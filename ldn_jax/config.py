@@ -106,7 +106,7 @@ class Config:
     """Number of seeds, vmapped; seed i uses PRNG key i."""
     k: tuple[float, ...] = (1.0,)
     """Learning-degree gains K (eq. 6), vmapped; K=1 is eq. 4."""
-    episodes: int = 400
+    episodes: int = 1600
     """Real episodes per seed and K, summed over workers."""
     workers: int = 8
     """Synchronous workers (vmapped); one real and one imagined episode each per iteration."""
