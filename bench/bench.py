@@ -9,8 +9,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
+import subprocess
 import time
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -73,12 +76,27 @@ def cartpole_env_steps(n_envs: int, auto_reset: bool, steps: int = 1000) -> dict
     }
 
 
-def training(algo: str, seeds: int = 10, episodes: int = 800, env: str = "cartpole-v1") -> dict:
+def training(
+    algo: str,
+    seeds: int = 10,
+    episodes: int = 800,
+    env: str = "cartpole-v1",
+    workers: int = 8,
+    chunk_iterations: int = 5,
+) -> dict:
     """Train from scratch (paper preset) and count real and imagined steps per wall second.
 
     The figure covers the whole run, the early iterations with short episodes included.
     """
-    config = from_preset("paper", env=env, algo=algo, seeds=seeds, episodes=episodes)
+    config = from_preset(
+        "paper",
+        env=env,
+        algo=algo,
+        seeds=seeds,
+        episodes=episodes,
+        workers=workers,
+        chunk_iterations=chunk_iterations,
+    )
     trainer = Trainer(config)
     states, k = trainer.init_batch(), trainer.k_values()
     start = time.perf_counter()
@@ -95,6 +113,8 @@ def training(algo: str, seeds: int = 10, episodes: int = 800, env: str = "cartpo
         "algo": algo,
         "env": env,
         "seeds": seeds,
+        "workers": workers,
+        "env_steps": env_steps,
         "episodes_per_seed": config.iterations * config.workers,
         "compile_s": round(compile_s, 2),
         "train_s": round(seconds, 2),
@@ -106,7 +126,16 @@ def training(algo: str, seeds: int = 10, episodes: int = 800, env: str = "cartpo
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--sections", default="env,train", help="comma list: env, train")
+    parser.add_argument(
+        "--sections", default="env,train,rejax", help="comma list: env, train, rejax"
+    )
+    parser.add_argument(
+        "--anchor-python",
+        default=os.environ.get(
+            "ANCHOR_PY", str(Path.home() / ".cache/ldn-anchors/venv/bin/python")
+        ),
+        help="python of the anchors' venv (shared/anchors/README.md), for side-by-side rows",
+    )
     args = parser.parse_args()
     sections = set(args.sections.split(","))
     result: dict = {
@@ -121,8 +150,52 @@ def main() -> None:
             for n in (1, 64, 1024, 8192)
         ]
     if "train" in sections:
-        result["training"] = [training(algo) for algo in ("a2c", "a2c-model", "ldn")]
+        result["training"] = [
+            training(algo) for algo in ("a2c", "a2c-model", "ldn", "ppo", "ppo-model", "ppo-ldn")
+        ]
+        _add_overheads(result["training"])
+    if "rejax" in sections:
+        result["ppo_vs_rejax"] = ppo_vs_rejax(args.anchor_python)
     print(json.dumps(result))
+
+
+def _add_overheads(rows: list[dict]) -> None:
+    """Wall seconds per real env step of each -model / -ldn variant over its plain learner's.
+
+    This is the cost of the model and imagination stages, reported apart from the learner's.
+    """
+    plain = {row["algo"]: row for row in rows if row["algo"] in ("a2c", "ppo")}
+    for row in rows:
+        base = plain["ppo" if row["algo"].startswith("ppo") else "a2c"]
+        row["seconds_per_env_step_vs_plain"] = round(
+            base["env_steps_per_s"] / max(row["env_steps_per_s"], 1), 2
+        )
+
+
+def ppo_vs_rejax(anchor_python: str) -> dict:
+    """Plain ppo at rejax's CartPole batch shape (1 seed, 5 workers, 100-step rollouts,
+    5 epochs x 5 minibatches, about 100k env steps), next to rejax measured in the same run.
+
+    rejax runs in its own venv (see shared/anchors/README.md); without it only ours is given.
+    """
+    # 480 episodes of 5 workers took 98,845 env steps from scratch (seed 0): rejax's 100k.
+    ours = training("ppo", seeds=1, episodes=480, workers=5, chunk_iterations=96)
+    out: dict = {"ours": ours}
+    script = Path(__file__).resolve().parents[1].parent / "shared/anchors/rejax_bench.py"
+    if not (Path(anchor_python).exists() and script.exists()):
+        out["rejax"] = f"not measured: needs {anchor_python} and {script}"
+        return out
+    cmd = [anchor_python, str(script), "--num-seeds", "1", "--repeats", "3"]
+    done = subprocess.run([*cmd, "--mode", "throughput"], capture_output=True, text=True)
+    if done.returncode != 0:
+        out["rejax"] = f"failed: {done.stderr.strip().splitlines()[-1:]}"
+        return out
+    rejax = json.loads(done.stdout.strip().splitlines()[-1])
+    out["rejax"] = {key: rejax[key] for key in ("steps_per_s_total", "compile_s", "num_envs")}
+    out["ours_over_rejax_steps_per_s"] = round(
+        ours["env_steps_per_s"] / rejax["steps_per_s_total"], 2
+    )
+    return out
 
 
 if __name__ == "__main__":

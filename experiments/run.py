@@ -1,4 +1,4 @@
-"""Train a2c / a2c-model / ldn on one env for many seeds and K values in one compiled program.
+"""Train the A2C or PPO family (plain, -model, -ldn) on one env, many seeds and K at once.
 
     python experiments/run.py --env cartpole-v2 --algo ldn --seeds 5 --k 0.5,1,2
 
@@ -100,10 +100,14 @@ def write_json(path: Path, data: dict) -> None:
     os.replace(tmp, path)
 
 
+LOSS_SUFFIXES = ("_loss", "_entropy", "_approx_kl", "_clip_fraction")
+"""Metrics written under "losses" in metrics.jsonl."""
+
+
 def metric_lines(config: Config, metrics: dict, wall_seconds: float) -> list[str]:
     """One JSON line per K, seed and iteration of a chunk's metrics `[K, S, N, ...]`."""
     lines = []
-    losses = [name for name in metrics if name.endswith(("_loss", "_entropy"))]
+    losses = [name for name in metrics if name.endswith(LOSS_SUFFIXES)]
     n_k, seeds, n_iter = metrics["iteration"].shape
     for ki in range(n_k):
         for seed in range(seeds):

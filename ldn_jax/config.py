@@ -33,6 +33,9 @@ ALGORITHMS: dict[str, Algorithm] = {
     "a2c-model": Algorithm("a2c", uses_model=True, ld_stop=False),
     "ldn": Algorithm("a2c", uses_model=True, ld_stop=True),
     "a2c-ldn": Algorithm("a2c", uses_model=True, ld_stop=True),
+    "ppo": Algorithm("ppo", uses_model=False, ld_stop=False),
+    "ppo-model": Algorithm("ppo", uses_model=True, ld_stop=False),
+    "ppo-ldn": Algorithm("ppo", uses_model=True, ld_stop=True),
 }
 
 THRESHOLDS = {"cartpole-v0": 150.0, "cartpole-v1": 150.0, "cartpole-v2": 100.0}
@@ -50,9 +53,9 @@ class AgentConfig:
     entropy_beta: float = 0.001
     """Weight of the policy entropy bonus."""
     actor_lr: float = 1e-3
-    """RMSProp learning rate of the actor."""
+    """Learning rate of the actor (RMSProp for A2C, Adam for PPO)."""
     critic_lr: float = 1e-3
-    """RMSProp learning rate of the critic."""
+    """Learning rate of the critic (RMSProp for A2C, Adam for PPO)."""
     rmsprop_decay: float = 0.9
     """RMSProp decay of the squared-gradient average (TensorFlow 1's default)."""
     rmsprop_eps: float = 1e-10
@@ -68,6 +71,18 @@ class AgentConfig:
     terminal_reward: float | None = None
     """If set, the training reward of a terminating step is replaced by this value (the
     tutorial code uses -5). Reported returns are always the environment's own."""
+    gae_lambda: float = 0.95
+    """PPO: lambda of generalised advantage estimation."""
+    clip_eps: float = 0.2
+    """PPO: clip range of the probability ratio (and of the value change, as in PPO2)."""
+    epochs: int = 4
+    """PPO: passes over each segment's transitions."""
+    minibatches: int = 4
+    """PPO: minibatches per pass (the segment's W * n_steps rows, shuffled)."""
+    value_coef: float = 0.5
+    """PPO: weight of the value loss."""
+    max_grad_norm: float = 0.5
+    """PPO: gradients are clipped to this global norm before the Adam step."""
 
 
 @dataclass(frozen=True)
@@ -147,6 +162,23 @@ class Config:
         return cls(**data, agent=agent, model=model)
 
 
+LEARNER_DEFAULTS: dict[str, dict] = {
+    "a2c": {},
+    # The paper gives no PPO2 constants: these are rejax's published CartPole PPO ones
+    # (100-step rollouts, 5 epochs x 5 minibatches, gamma 0.99, GAE 0.95, entropy 0.01,
+    # Adam 7.5e-4, clip 0.2, value 0.5, grad norm 0.5) on the paper's networks.
+    "ppo": {
+        "gamma": 0.99,
+        "n_steps": 100,
+        "epochs": 5,
+        "minibatches": 5,
+        "entropy_beta": 0.01,
+        "actor_lr": 7.5e-4,
+        "critic_lr": 7.5e-4,
+    },
+}
+"""Agent values that differ by learner; a preset's own agent values override them."""
+
 PRESETS: dict[str, dict] = {
     "paper": {},
     # The tutorial code's -5 terminal reward, which speeds up CartPole learning at gamma 0.9.
@@ -161,7 +193,9 @@ def from_preset(name: str, **overrides) -> Config:
     if name not in PRESETS:
         raise ValueError(f"unknown preset {name!r}; valid presets: {', '.join(PRESETS)}")
     preset = PRESETS[name]
-    agent = dict(preset.get("agent", {}), **overrides.pop("agent", {}))
+    algo = overrides.get("algo", Config.algo)
+    learner = ALGORITHMS[algo].learner if algo in ALGORITHMS else "a2c"
+    agent = {**LEARNER_DEFAULTS[learner], **preset.get("agent", {}), **overrides.pop("agent", {})}
     model = dict(preset.get("model", {}), **overrides.pop("model", {}))
     top = {k: v for k, v in preset.items() if k not in ("agent", "model")}
     return Config(
@@ -189,6 +223,11 @@ def validate(config: Config) -> Config:
         (config.agent.n_steps >= 1, "n_steps must be >= 1"),
         (config.agent.actor_lr > 0 and config.agent.critic_lr > 0, "learning rates must be > 0"),
         (config.agent.activation in ACTIVATIONS, f"activation must be one of {ACTIVATIONS}"),
+        (0 <= config.agent.gae_lambda <= 1, "gae_lambda must be in [0, 1]"),
+        (config.agent.clip_eps > 0, "clip_eps must be > 0"),
+        (config.agent.epochs >= 1, "epochs must be >= 1"),
+        (config.agent.minibatches >= 1, "minibatches must be >= 1"),
+        (config.agent.max_grad_norm > 0, "max_grad_norm must be > 0"),
         (config.model.activation in ACTIVATIONS, f"model activation must be one of {ACTIVATIONS}"),
         (config.model.lr > 0, "model lr must be > 0"),
         (config.model.updates >= 0, "model updates must be >= 0"),

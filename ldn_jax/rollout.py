@@ -101,8 +101,9 @@ def play_episodes(
         return carry, (transition, extras)
 
     def segment(carry: EpisodeCarry, key: Array):
-        carry, (transitions, extras) = jax.lax.scan(step, carry, jax.random.split(key, n_steps))
-        learner_state, losses = learner.update(carry.learner, transitions)
+        k_steps, k_update = jax.random.split(key)
+        carry, (transitions, extras) = jax.lax.scan(step, carry, jax.random.split(k_steps, n_steps))
+        learner_state, losses = learner.update(carry.learner, transitions, k_update)
         return carry.replace(learner=learner_state), (transitions, extras, losses)
 
     carry = EpisodeCarry(

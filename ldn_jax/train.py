@@ -5,6 +5,7 @@ One iteration, per seed and K:
 2. `model_stage`: M1 takes `model.updates` minibatch steps on the real buffer.
 3. `imagine_stage`: each worker plays one episode in M1 from a fresh initial state.
 `a2c` runs stage 1 only; `a2c-model` runs all three without the LD stop; `ldn` with it.
+The PPO family (`ppo`, `ppo-model`, `ppo-ldn`) is the same with PPO as the learner.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from ldn_jax.buffer import Buffer, Transitions, buffer_add, buffer_init
 from ldn_jax.config import Config
 from ldn_jax.dynamics import Dynamics, ModelState
 from ldn_jax.imagination import model_world
-from ldn_jax.learners.a2c import A2C
+from ldn_jax.learners import LEARNERS
 from ldn_jax.learners.base import LearnerState
 from ldn_jax.rollout import Episodes, play_episodes
 
@@ -52,7 +53,8 @@ class Trainer:
         self.obs_size = self.env.observation_size(self.env_params)
         self.n_actions = self.env.action_spec(self.env_params).size
         self.max_steps = self.env_params.max_steps
-        self.learner = A2C(config.agent, self.obs_size, self.n_actions)
+        learner = LEARNERS[config.algorithm.learner]
+        self.learner = learner(config.agent, self.obs_size, self.n_actions)
         self.dynamics = (
             Dynamics(config.model, self.obs_size, self.n_actions)
             if config.algorithm.uses_model

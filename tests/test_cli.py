@@ -86,3 +86,16 @@ def test_bad_input_exits_2_with_one_line(args, needle):
 def test_existing_run_is_never_overwritten(run_dir):
     result = _run("--out", str(run_dir), timeout=60)
     assert result.returncode == 2 and "already holds a run" in result.stderr
+
+
+def test_ppo_ldn_run_logs_ppo_losses(tmp_path):
+    out = tmp_path / "ppo-ldn"
+    args = ["--env", "cartpole-v0", "--algo", "ppo-ldn", "--seeds", "1", "--k", "1"]
+    result = _run(*args, "--episodes", "8", "--workers", "4", "--chunk", "2", "--out", str(out))
+    assert result.returncode == 0, result.stderr
+    config = json.loads((out / "config.json").read_text())
+    assert config["agent"]["n_steps"] == 100 and config["agent"]["gamma"] == 0.99
+    line = json.loads((out / "metrics.jsonl").read_text().splitlines()[-1])
+    for name in ("real_actor_loss", "real_approx_kl", "imagined_clip_fraction", "model_loss"):
+        assert name in line["losses"], line["losses"]
+    assert line["imagined_steps"] > 0

@@ -135,8 +135,9 @@ def _run_chunks(trainer, states, chunks=2):
     return states, history
 
 
-def test_m0_is_bitwise_frozen_and_m1_moves():
-    trainer = Trainer(_config())
+@pytest.mark.parametrize("algo", ["ldn", "ppo-model"])
+def test_m0_is_bitwise_frozen_and_m1_moves(algo):
+    trainer = Trainer(_config(algo=algo))
     initial = jax.device_get(trainer.init_batch())
     final, _ = _run_chunks(trainer, trainer.init_batch())
     leaves = lambda tree: jax.tree.leaves(jax.device_get(tree))
@@ -150,9 +151,9 @@ def test_m0_is_bitwise_frozen_and_m1_moves():
     assert int(final.imagined_steps.min()) > 0
 
 
-@pytest.mark.parametrize("algo", ["a2c", "ldn"])
+@pytest.mark.parametrize("algo", ["a2c", "ldn", "ppo-ldn"])
 def test_same_seed_gives_bitwise_identical_metrics(algo):
-    trainer = Trainer(_config(algo=algo, k=(1.0, 2.0) if algo == "ldn" else (1.0,)))
+    trainer = Trainer(_config(algo=algo, k=(1.0, 2.0) if algo.endswith("ldn") else (1.0,)))
     _, first = _run_chunks(trainer, trainer.init_batch())
     _, second = _run_chunks(trainer, trainer.init_batch())
     for m1, m2 in zip(first, second, strict=True):

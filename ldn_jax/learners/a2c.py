@@ -11,8 +11,15 @@ import jax.numpy as jnp
 import optax
 
 from ldn_jax.config import AgentConfig
-from ldn_jax.learners.base import LearnerState, Segment, keep_if_any, masked_obs, worker_mean
-from ldn_jax.networks import MLP
+from ldn_jax.learners.base import (
+    ActorCritic,
+    LearnerState,
+    Segment,
+    canonical,
+    keep_if_any,
+    training_reward,
+    worker_mean,
+)
 
 Array = jax.Array
 
@@ -38,16 +45,11 @@ def n_step_targets(
     return targets
 
 
-class A2C:
-    """Pure functions over `LearnerState` for one env's sizes; holds no state."""
+class A2C(ActorCritic):
+    """One RMSProp step per segment on the n-step actor-critic loss."""
 
     def __init__(self, config: AgentConfig, obs_size: int, n_actions: int):
-        self.config = config
-        self.obs_size = obs_size
-        self.n_actions = n_actions
-        mlp = lambda hidden, out: MLP(hidden, out, config.activation, config.init_std)
-        self.actor = mlp(config.actor_hidden, n_actions)
-        self.critic = mlp(config.critic_hidden, 1)
+        super().__init__(config, obs_size, n_actions)
         rmsprop = lambda lr: optax.rmsprop(
             lr,
             decay=config.rmsprop_decay,
@@ -59,43 +61,16 @@ class A2C:
             {"actor": "actor", "critic": "critic"},
         )
 
-    def init(self, key: Array) -> LearnerState:
-        k_actor, k_critic = jax.random.split(key)
-        dummy = jnp.zeros((1, self.obs_size))
-        params = {
-            "actor": self.actor.init(k_actor, dummy),
-            "critic": self.critic.init(k_critic, dummy),
-        }
-        return LearnerState(params=params, opt_state=self.optimizer.init(params))
-
-    def logits(self, params: dict, obs: Array) -> Array:
-        return self.actor.apply(params["actor"], obs)
-
-    def value(self, params: dict, obs: Array) -> Array:
-        return self.critic.apply(params["critic"], obs)[..., 0]
-
-    def act(self, params: dict, key: Array, obs: Array) -> Array:
-        """Sample from the softmax policy, `[W, obs] -> [W]`."""
-        return jax.random.categorical(key, self.logits(params, obs))
-
-    def greedy(self, params: dict, obs: Array) -> Array:
-        return jnp.argmax(self.logits(params, obs), axis=-1)
-
     def loss(self, params: dict, segment: Segment) -> tuple[Array, dict]:
+        """The A3C loss of a canonical segment (masked steps zeroed), averaged over workers."""
         cfg = self.config
         weight = segment.weight
-        obs = masked_obs(segment.obs, weight)
-        next_obs = masked_obs(segment.next_obs, weight)
-        reward = segment.reward
-        if cfg.terminal_reward is not None:
-            reward = jnp.where(segment.terminated, cfg.terminal_reward, reward)
-        next_value = jax.lax.stop_gradient(self.value(params, next_obs))
-        targets = n_step_targets(reward, next_value, segment.terminated, segment.done, cfg.gamma)
-        value = self.value(params, obs)
-        advantage = targets - value
-        log_probs = jax.nn.log_softmax(self.logits(params, obs))
-        log_prob = jnp.take_along_axis(log_probs, segment.action[..., None], axis=-1)[..., 0]
-        entropy = -jnp.sum(jnp.exp(log_probs) * log_probs, axis=-1)
+        next_value = jax.lax.stop_gradient(self.value(params, segment.next_obs))
+        targets = n_step_targets(
+            training_reward(segment, cfg), next_value, segment.terminated, segment.done, cfg.gamma
+        )
+        advantage = targets - self.value(params, segment.obs)
+        log_prob, entropy = self.log_prob_entropy(params, segment.obs, segment.action)
         critic_loss = worker_mean(jnp.square(advantage), weight)
         policy_loss = -worker_mean(log_prob * jax.lax.stop_gradient(advantage), weight)
         entropy_mean = worker_mean(entropy, weight)
@@ -106,8 +81,14 @@ class A2C:
             "entropy": entropy_mean,
         }
 
-    def update(self, state: LearnerState, segment: Segment) -> tuple[LearnerState, dict]:
-        """One RMSProp step on a segment; a fully masked segment leaves `state` unchanged."""
+    def update(
+        self, state: LearnerState, segment: Segment, key: Array | None = None
+    ) -> tuple[LearnerState, dict]:
+        """One RMSProp step on a segment; a fully masked segment leaves `state` unchanged.
+
+        `key` is unused (the update is deterministic); it is there for the common interface.
+        """
+        segment = canonical(segment)
         grads, info = jax.grad(self.loss, has_aux=True)(state.params, segment)
         updates, opt_state = self.optimizer.update(grads, state.opt_state, state.params)
         new = LearnerState(optax.apply_updates(state.params, updates), opt_state)

@@ -1,10 +1,13 @@
-"""What every learner consumes: a time-major segment of (possibly masked) transitions."""
+"""What every learner shares: the masked segment it consumes and the actor-critic it trains."""
 
 from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
 from flax import struct
+
+from ldn_jax.config import AgentConfig
+from ldn_jax.networks import MLP
 
 Array = jax.Array
 
@@ -31,6 +34,34 @@ class LearnerState:
     opt_state: tuple
 
 
+def zero_masked(tree, weight: Array):
+    """Zero every leaf of `tree` (leaves shaped `[*weight.shape, ...]`) where `weight` is 0."""
+    live = weight > 0
+
+    def zero(x: Array) -> Array:
+        mask = live.reshape(live.shape + (1,) * (x.ndim - live.ndim))
+        return jnp.where(mask, x, jnp.zeros_like(x))
+
+    return jax.tree.map(zero, tree)
+
+
+def canonical(segment: Segment) -> Segment:
+    """Zero every field of the masked steps.
+
+    Whatever a masked step holds (a frozen observation, a model's inf, NaN), the learner then
+    sees the same finite numbers, so its forward and backward passes cannot pick up a NaN
+    through a `0 * NaN` and masked steps change nothing, to the bit.
+    """
+    return zero_masked(segment, segment.weight)
+
+
+def training_reward(segment: Segment, config: AgentConfig) -> Array:
+    """The reward the learner trains on: the env's, or `terminal_reward` on terminal steps."""
+    if config.terminal_reward is None:
+        return segment.reward
+    return jnp.where(segment.terminated, config.terminal_reward, segment.reward)
+
+
 def worker_mean(x: Array, weight: Array) -> Array:
     """Mean over each worker's live steps, then over workers with any: `[n, W] -> []`.
 
@@ -45,16 +76,68 @@ def worker_mean(x: Array, weight: Array) -> Array:
     return jnp.where(active, per_worker, 0.0).sum() / jnp.maximum(active.sum(), 1)
 
 
-def keep_if_any(new, old, weight: Array):
-    """`new` where the segment has any live transition, else `old`.
+def weighted_mean(x: Array, weight: Array) -> Array:
+    """Mean over the live entries of `x` (any shape), weighted; 0 when none is live."""
+    total = jnp.where(weight > 0, x * weight, 0.0).sum()
+    return total / jnp.maximum(weight.sum(), 1.0)
 
-    An empty segment must not touch the optimiser: a zero gradient would still decay
+
+def keep_if_any(new, old, weight: Array):
+    """`new` where the batch has any live transition, else `old`.
+
+    An empty batch must not touch the optimiser: a zero gradient would still decay
     RMSProp's and Adam's moment estimates.
     """
     any_live = weight.sum() > 0
     return jax.tree.map(lambda n, o: jnp.where(any_live, n, o), new, old)
 
 
-def masked_obs(obs: Array, weight: Array) -> Array:
-    """Zero the observations of masked steps so their (unused) forward passes stay finite."""
-    return jnp.where(weight[..., None] > 0, obs, 0.0)
+def categorical_log_prob_entropy(logits: Array, action: Array) -> tuple[Array, Array]:
+    """`log pi(action)` and the entropy of the softmax policy, `[..., A], [...] -> [...], [...]`."""
+    log_probs = jax.nn.log_softmax(logits)
+    log_prob = jnp.take_along_axis(log_probs, action[..., None], axis=-1)[..., 0]
+    entropy = -jnp.sum(jnp.exp(log_probs) * log_probs, axis=-1)
+    return log_prob, entropy
+
+
+class ActorCritic:
+    """The paper's actor (softmax policy) and critic; a learner adds its loss and update.
+
+    Subclasses set `self.optimizer` and implement
+    `update(state, segment, key) -> (state, losses)`.
+    """
+
+    optimizer: object
+
+    def __init__(self, config: AgentConfig, obs_size: int, n_actions: int):
+        self.config = config
+        self.obs_size = obs_size
+        self.n_actions = n_actions
+        mlp = lambda hidden, out: MLP(hidden, out, config.activation, config.init_std)
+        self.actor = mlp(config.actor_hidden, n_actions)
+        self.critic = mlp(config.critic_hidden, 1)
+
+    def init(self, key: Array) -> LearnerState:
+        k_actor, k_critic = jax.random.split(key)
+        dummy = jnp.zeros((1, self.obs_size))
+        params = {
+            "actor": self.actor.init(k_actor, dummy),
+            "critic": self.critic.init(k_critic, dummy),
+        }
+        return LearnerState(params=params, opt_state=self.optimizer.init(params))
+
+    def logits(self, params: dict, obs: Array) -> Array:
+        return self.actor.apply(params["actor"], obs)
+
+    def value(self, params: dict, obs: Array) -> Array:
+        return self.critic.apply(params["critic"], obs)[..., 0]
+
+    def act(self, params: dict, key: Array, obs: Array) -> Array:
+        """Sample from the softmax policy, `[W, obs] -> [W]`."""
+        return jax.random.categorical(key, self.logits(params, obs))
+
+    def greedy(self, params: dict, obs: Array) -> Array:
+        return jnp.argmax(self.logits(params, obs), axis=-1)
+
+    def log_prob_entropy(self, params: dict, obs: Array, action: Array) -> tuple[Array, Array]:
+        return categorical_log_prob_entropy(self.logits(params, obs), action)

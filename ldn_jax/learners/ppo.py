@@ -1,0 +1,184 @@
+"""PPO2: the clipped surrogate with GAE, several epochs of shuffled minibatches, Adam.
+
+PPO's rollout is one segment of n steps from W workers, collected with fixed parameters; at
+the segment's end the learner makes `epochs` passes over its `n * W` rows in `minibatches`
+shuffled minibatches. Masked rows (workers whose episode had ended, imagined steps after the
+LD stop) carry weight 0 into every loss and statistic, so they change nothing.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import optax
+from flax import struct
+
+from ldn_jax.config import AgentConfig
+from ldn_jax.learners.base import (
+    ActorCritic,
+    LearnerState,
+    Segment,
+    canonical,
+    keep_if_any,
+    training_reward,
+    weighted_mean,
+)
+
+Array = jax.Array
+
+
+def gae(
+    reward: Array,
+    value: Array,
+    next_value: Array,
+    terminated: Array,
+    done: Array,
+    gamma: float,
+    lam: float,
+) -> Array:
+    """Generalised advantage estimates of one segment, `[n, W] -> [n, W]`.
+
+    delta_t = r_t + gamma * (1 - terminated_t) * V(s'_t) - V(s_t);
+    A_t = delta_t + gamma * lam * (1 - done_t) * A_{t+1}, and A_{n} = 0 past the segment.
+    A truncation (time limit, LD stop) bootstraps from V(s'_t) and ends the recursion; a
+    termination does neither.
+    """
+    delta = reward + gamma * (1.0 - terminated.astype(reward.dtype)) * next_value - value
+
+    def backward(following, step):
+        delta, done = step
+        advantage = delta + gamma * lam * jnp.where(done, 0.0, following)
+        return advantage, advantage
+
+    _, advantages = jax.lax.scan(backward, jnp.zeros_like(delta[-1]), (delta, done), reverse=True)
+    return advantages
+
+
+def clipped_surrogate(ratio: Array, advantage: Array, clip_eps: float) -> Array:
+    """PPO's objective per sample (to maximise): min(r A, clip(r, 1 - eps, 1 + eps) A)."""
+    clipped = jnp.clip(ratio, 1.0 - clip_eps, 1.0 + clip_eps)
+    return jnp.minimum(ratio * advantage, clipped * advantage)
+
+
+@struct.dataclass
+class Batch:
+    """PPO's training rows, flat `[N, ...]`; the rollout's quantities are fixed."""
+
+    obs: Array
+    action: Array
+    log_prob: Array
+    """log pi_old(a|s) of the parameters that collected the segment."""
+    value: Array
+    """V_old(s), the centre of PPO2's value clip."""
+    advantage: Array
+    target: Array
+    """Value target: advantage + V_old(s) (the lambda-return)."""
+    weight: Array
+
+
+class PPO(ActorCritic):
+    """Clipped-objective PPO (PPO2) on each segment; Adam with global-norm clipping."""
+
+    def __init__(self, config: AgentConfig, obs_size: int, n_actions: int):
+        super().__init__(config, obs_size, n_actions)
+        self.optimizer = optax.chain(
+            optax.clip_by_global_norm(config.max_grad_norm),
+            optax.multi_transform(
+                {"actor": optax.adam(config.actor_lr), "critic": optax.adam(config.critic_lr)},
+                {"actor": "actor", "critic": "critic"},
+            ),
+        )
+
+    def batch(self, params: dict, segment: Segment) -> Batch:
+        """GAE and the old policy's quantities of a canonical segment, flattened to rows."""
+        cfg = self.config
+        value = self.value(params, segment.obs)
+        next_value = self.value(params, segment.next_obs)
+        advantage = gae(
+            training_reward(segment, cfg),
+            value,
+            next_value,
+            segment.terminated,
+            segment.done,
+            cfg.gamma,
+            cfg.gae_lambda,
+        )
+        log_prob, _ = self.log_prob_entropy(params, segment.obs, segment.action)
+        rows = Batch(
+            obs=segment.obs,
+            action=segment.action,
+            log_prob=log_prob,
+            value=value,
+            advantage=advantage,
+            target=advantage + value,
+            weight=segment.weight,
+        )
+        return jax.tree.map(lambda x: x.reshape((-1, *x.shape[2:])), rows)
+
+    def loss(self, params: dict, batch: Batch) -> tuple[Array, dict]:
+        """PPO2's loss on one minibatch: clipped surrogate + clipped value loss - entropy."""
+        cfg = self.config
+        w = batch.weight
+        mean = lambda x: weighted_mean(x, w)
+        # Advantages normalised per minibatch, over its live rows.
+        centre = mean(batch.advantage)
+        scale = jnp.sqrt(mean(jnp.square(batch.advantage - centre)))
+        advantage = (batch.advantage - centre) / (scale + 1e-8)
+
+        log_prob, entropy = self.log_prob_entropy(params, batch.obs, batch.action)
+        log_ratio = log_prob - batch.log_prob
+        ratio = jnp.exp(log_ratio)
+        actor_loss = -mean(clipped_surrogate(ratio, advantage, cfg.clip_eps))
+
+        value = self.value(params, batch.obs)
+        clipped_value = batch.value + jnp.clip(value - batch.value, -cfg.clip_eps, cfg.clip_eps)
+        critic_loss = 0.5 * mean(
+            jnp.maximum(jnp.square(value - batch.target), jnp.square(clipped_value - batch.target))
+        )
+        entropy_mean = mean(entropy)
+        total = actor_loss + cfg.value_coef * critic_loss - cfg.entropy_beta * entropy_mean
+        return total, {
+            "actor_loss": actor_loss,
+            "critic_loss": critic_loss,
+            "entropy": entropy_mean,
+            "approx_kl": jax.lax.stop_gradient(mean((ratio - 1.0) - log_ratio)),
+            "clip_fraction": jax.lax.stop_gradient(
+                mean((jnp.abs(ratio - 1.0) > cfg.clip_eps).astype(jnp.float32))
+            ),
+        }
+
+    def minibatch_step(self, state: LearnerState, batch: Batch) -> tuple[LearnerState, tuple]:
+        """One Adam step; a minibatch without live rows leaves `state` unchanged."""
+        grads, info = jax.grad(self.loss, has_aux=True)(state.params, batch)
+        updates, opt_state = self.optimizer.update(grads, state.opt_state, state.params)
+        new = LearnerState(optax.apply_updates(state.params, updates), opt_state)
+        return keep_if_any(new, state, batch.weight), (info, batch.weight.sum() > 0)
+
+    def update(
+        self, state: LearnerState, segment: Segment, key: Array
+    ) -> tuple[LearnerState, dict]:
+        """`epochs` passes of `minibatches` shuffled minibatches over one segment's rows.
+
+        The row count is padded with weight-0 rows to a multiple of `minibatches`, so any
+        W x n works. Returns the losses averaged over minibatches that had live rows.
+        """
+        cfg = self.config
+        batch = self.batch(state.params, canonical(segment))
+        rows = batch.weight.shape[0]
+        size = math.ceil(rows / cfg.minibatches)
+        pad = size * cfg.minibatches - rows
+        batch = jax.tree.map(lambda x: jnp.pad(x, [(0, pad)] + [(0, 0)] * (x.ndim - 1)), batch)
+
+        def epoch(state: LearnerState, key: Array):
+            order = jax.random.permutation(key, rows + pad)
+            shuffled = jax.tree.map(
+                lambda x: x[order].reshape((cfg.minibatches, size, *x.shape[1:])), batch
+            )
+            return jax.lax.scan(self.minibatch_step, state, shuffled)
+
+        state, (info, live) = jax.lax.scan(epoch, state, jax.random.split(key, cfg.epochs))
+        live = live.astype(jnp.float32)
+        info = jax.tree.map(lambda x: (x * live).sum() / jnp.maximum(live.sum(), 1.0), info)
+        return state, info

@@ -1,0 +1,173 @@
+"""PPO: the clipped surrogate, GAE, and masked steps that change nothing, to the bit."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from ldn_jax.config import AgentConfig, from_preset
+from ldn_jax.learners import A2C, PPO
+from ldn_jax.learners.base import Segment
+from ldn_jax.learners.ppo import clipped_surrogate, gae
+
+PPO_AGENT = from_preset("paper", algo="ppo").agent
+
+
+def test_clipped_surrogate_hand_computed():
+    ratio = jnp.array([0.5, 1.0, 1.5, 1.1, 0.5, 1.5, 1.19])
+    advantage = jnp.array([1.0, -1.0, 1.0, -1.0, -1.0, -2.0, 3.0])
+    expected = [
+        0.5,  # r < 1 - eps, A > 0: min(0.5, 0.8) keeps the unclipped, pessimistic term
+        -1.0,  # r = 1: both terms equal r A
+        1.2,  # r > 1 + eps, A > 0: clipped at 1.2 A
+        -1.1,  # inside the range: r A
+        -0.8,  # r < 1 - eps, A < 0: clipped at 0.8 A
+        -3.0,  # r > 1 + eps, A < 0: min(-3.0, -2.4) keeps the unclipped r A
+        3.57,  # inside the range
+    ]
+    np.testing.assert_allclose(np.asarray(clipped_surrogate(ratio, advantage, 0.2)), expected)
+
+
+def _gae_loop(reward, value, next_value, terminated, done, gamma, lam):
+    n, workers = reward.shape
+    out = np.zeros((n, workers))
+    for w in range(workers):
+        following = 0.0
+        for t in reversed(range(n)):
+            delta = reward[t, w] + gamma * (not terminated[t, w]) * next_value[t, w] - value[t, w]
+            if done[t, w]:
+                following = 0.0
+            following = delta + gamma * lam * following
+            out[t, w] = following
+    return out
+
+
+def test_gae_matches_a_python_loop_with_terminations_and_truncations():
+    rng = np.random.default_rng(0)
+    n, workers = 37, 6
+    reward, value, next_value = (rng.normal(size=(n, workers)) for _ in range(3))
+    done = rng.random((n, workers)) < 0.15
+    terminated = done & (rng.random((n, workers)) < 0.5)
+    assert (done & ~terminated).any() and terminated.any()
+    got = gae(
+        *(jnp.asarray(x, jnp.float32) for x in (reward, value, next_value)),
+        jnp.asarray(terminated),
+        jnp.asarray(done),
+        0.97,
+        0.9,
+    )
+    want = _gae_loop(reward, value, next_value, terminated, done, 0.97, 0.9)
+    np.testing.assert_allclose(np.asarray(got), want, rtol=1e-5, atol=1e-5)
+
+
+def test_gae_truncation_bootstraps_and_termination_does_not():
+    reward = jnp.ones((1, 2))
+    value = jnp.zeros((1, 2))
+    next_value = jnp.full((1, 2), 10.0)
+    done = jnp.array([[True, True]])
+    terminated = jnp.array([[False, True]])  # worker 0 truncated (LD stop), worker 1 terminal
+    got = np.asarray(gae(reward, value, next_value, terminated, done, 0.5, 0.95))
+    np.testing.assert_allclose(got, [[1.0 + 0.5 * 10.0, 1.0]])
+
+
+def _segment(key, n, workers, obs_size=4, n_actions=2, dead_from=None):
+    keys = jax.random.split(key, 4)
+    weight = jnp.ones((n, workers))
+    if dead_from is not None:  # worker w's episode ended (done) at step dead_from[w] - 1
+        steps = jnp.arange(n)[:, None]
+        weight = (steps < jnp.asarray(dead_from)[None]).astype(jnp.float32)
+    done = jnp.zeros((n, workers), bool)
+    if dead_from is not None:
+        done = jnp.arange(n)[:, None] == jnp.asarray(dead_from)[None] - 1
+    return Segment(
+        obs=jax.random.normal(keys[0], (n, workers, obs_size)),
+        action=jax.random.randint(keys[1], (n, workers), 0, n_actions),
+        reward=jax.random.normal(keys[2], (n, workers)),
+        next_obs=jax.random.normal(keys[3], (n, workers, obs_size)),
+        terminated=done & (jnp.arange(workers) % 2 == 0)[None],
+        done=done,
+        weight=weight,
+    )
+
+
+def _garbage_in_masked_steps(segment, key):
+    """The same segment with NaN, inf and random flags wherever the weight is 0."""
+    dead = segment.weight == 0
+    k_action, k_flag = jax.random.split(key)
+    nan_obs = jnp.where(dead[..., None], jnp.nan, segment.obs)
+    return segment.replace(
+        obs=nan_obs,
+        next_obs=jnp.where(dead[..., None], jnp.inf, segment.next_obs),
+        reward=jnp.where(dead, -jnp.inf, segment.reward),
+        action=jnp.where(dead, jax.random.randint(k_action, dead.shape, 0, 2), segment.action),
+        terminated=jnp.where(dead, jax.random.bernoulli(k_flag, 0.5, dead.shape), False)
+        | segment.terminated,
+        done=jnp.where(dead, True, segment.done),
+    )
+
+
+def _assert_trees_equal(a, b):
+    for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+
+
+@pytest.mark.parametrize("learner_cls", [A2C, PPO])
+def test_masked_steps_change_nothing_bitwise(learner_cls):
+    agent = PPO_AGENT if learner_cls is PPO else AgentConfig()
+    learner = learner_cls(agent, obs_size=4, n_actions=2)
+    state = learner.init(jax.random.key(0))
+    # Imagined-looking segment: workers stopped after 1, 3, 7 and all 12 steps.
+    segment = _segment(jax.random.key(1), 12, 4, dead_from=[1, 3, 7, 12])
+    garbage = _garbage_in_masked_steps(segment, jax.random.key(2))
+    update = jax.jit(learner.update)
+    clean, clean_info = update(state, segment, jax.random.key(3))
+    dirty, dirty_info = update(state, garbage, jax.random.key(3))
+    _assert_trees_equal(clean, dirty)
+    _assert_trees_equal(clean_info, dirty_info)
+    assert all(np.isfinite(np.asarray(x)).all() for x in jax.tree.leaves(dirty))
+    # ...and the live steps did move the parameters.
+    moved = jax.tree.map(lambda a, b: bool((a != b).any()), clean.params, state.params)
+    assert all(jax.tree.leaves(moved))
+
+
+def test_ppo_fully_masked_segment_leaves_state_bitwise_unchanged():
+    learner = PPO(PPO_AGENT, obs_size=4, n_actions=2)
+    state = learner.init(jax.random.key(0))
+    segment = _segment(jax.random.key(1), 10, 3)
+    dead = segment.replace(weight=jnp.zeros_like(segment.weight))
+    same, _ = jax.jit(learner.update)(state, dead, jax.random.key(2))
+    _assert_trees_equal(same, state)
+
+
+def test_ppo_any_row_count_pads_to_whole_minibatches():
+    agent = from_preset("paper", algo="ppo", agent={"minibatches": 4, "epochs": 2}).agent
+    learner = PPO(agent, obs_size=3, n_actions=2)
+    state = learner.init(jax.random.key(0))
+    segment = _segment(jax.random.key(1), 7, 3, obs_size=3)  # 21 rows, 4 minibatches
+    new, info = jax.jit(learner.update)(state, segment, jax.random.key(2))
+    assert np.isfinite(float(info["actor_loss"]))
+    assert not np.array_equal(
+        np.asarray(jax.tree.leaves(new.params)[0]), np.asarray(jax.tree.leaves(state.params)[0])
+    )
+
+
+def test_ppo_update_raises_probability_of_the_better_action():
+    # A bandit: action 0 pays 1, action 1 pays 0; one-step episodes, no bootstrap.
+    learner = PPO(PPO_AGENT, obs_size=2, n_actions=2)
+    state = learner.init(jax.random.key(0))
+    n, workers = 16, 8
+    action = jnp.tile(jnp.arange(workers) % 2, (n, 1))
+    segment = Segment(
+        obs=jnp.ones((n, workers, 2)),
+        action=action,
+        reward=(action == 0).astype(jnp.float32),
+        next_obs=jnp.ones((n, workers, 2)),
+        terminated=jnp.ones((n, workers), bool),
+        done=jnp.ones((n, workers), bool),
+        weight=jnp.ones((n, workers)),
+    )
+    prob = lambda params: jax.nn.softmax(learner.logits(params, jnp.ones((1, 2))))[0, 0]
+    new, info = jax.jit(learner.update)(state, segment, jax.random.key(1))
+    assert float(prob(new.params)) > float(prob(state.params)) + 0.05
+    # The first pass starts at ratio 1; later passes move it, within reason.
+    assert 0 <= float(info["clip_fraction"]) <= 1 and float(info["approx_kl"]) >= 0
