@@ -8,8 +8,11 @@ Writes config.json, metrics.jsonl, summary.json, curves.png and checkpoints/ int
 from __future__ import annotations
 
 import argparse
+import io
 import json
 import os
+import shutil
+import signal
 import sys
 import time
 from pathlib import Path
@@ -25,7 +28,7 @@ from ldn_jax import checkpoint
 from ldn_jax.config import ALGORITHMS, PRESETS, Config, from_preset, validate
 from ldn_jax.metrics import threshold_crossing
 from ldn_jax.policy import FINAL_CHECKPOINT
-from ldn_jax.train import Trainer
+from ldn_jax.train import Trainer, failure_names
 
 
 class UsageError(Exception):
@@ -37,52 +40,125 @@ class _Parser(argparse.ArgumentParser):
         raise UsageError(message)
 
 
+DEFAULTS = {
+    "env": "cartpole-v2",
+    "algo": "ldn",
+    "seeds": 5,
+    "k": "0.5,1,2",
+    "episodes": 1600,
+    "preset": "paper",
+}
+"""Defaults of the config flags; they are None in the parsed args so `--resume` can tell
+which flags were given."""
+
+
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p = _Parser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--env", default="cartpole-v2", help=f"one of: {', '.join(envs.names())}")
-    p.add_argument("--algo", default="ldn", help=f"one of: {', '.join(ALGORITHMS)}")
-    p.add_argument("--seeds", type=int, default=5, help="number of vmapped seeds (0..N-1)")
-    p.add_argument("--k", default="0.5,1,2", help="comma-separated learning-degree gains K")
-    p.add_argument("--episodes", type=int, default=1600, help="real episodes per seed and K")
-    p.add_argument("--workers", type=int, default=None, help="synchronous workers (default 8)")
-    p.add_argument("--preset", default="paper", help=f"one of: {', '.join(PRESETS)}")
-    p.add_argument("--threshold", type=float, default=None, help="moving-return threshold")
-    p.add_argument("--out", default=None, help="run directory (default runs/ENV-ALGO-TIME)")
-    p.add_argument(
-        "--chunk", type=int, default=None, help="iterations per compiled chunk (default 5)"
-    )
+    p.add_argument("--env", help=f"one of: {', '.join(envs.names())} (default cartpole-v2)")
+    p.add_argument("--algo", help=f"one of: {', '.join(ALGORITHMS)} (default ldn)")
+    p.add_argument("--seeds", type=int, help="number of vmapped seeds 0..N-1 (default 5)")
+    p.add_argument("--k", help="comma-separated learning-degree gains K (default 0.5,1,2)")
+    p.add_argument("--episodes", type=int, help="real episodes per seed and K (default 1600)")
+    p.add_argument("--workers", type=int, help="synchronous workers (default 8)")
+    p.add_argument("--preset", help=f"one of: {', '.join(PRESETS)} (default paper)")
+    p.add_argument("--threshold", type=float, help="moving-return threshold")
+    p.add_argument("--chunk", type=int, help="iterations per compiled chunk (default 5)")
+    p.add_argument("--out", help="run directory (default runs/ENV-ALGO-TIME)")
+    p.add_argument("--resume", metavar="DIR", help="continue the run in DIR from its checkpoint")
     p.add_argument(
         "--checkpoint-every", type=int, default=20, help="chunks between checkpoints (0: end only)"
     )
     p.add_argument("--quiet", action="store_true", help="no live progress display")
-    return p.parse_args(argv)
+    args = p.parse_args(argv)
+    if args.checkpoint_every < 0:
+        raise UsageError("--checkpoint-every must be >= 0")
+    return args
+
+
+CONFIG_FLAGS = {
+    "env": "env",
+    "algo": "algo",
+    "seeds": "seeds",
+    "k": "k",
+    "episodes": "episodes",
+    "workers": "workers",
+    "preset": "preset",
+    "threshold": "threshold",
+    "chunk": "chunk_iterations",
+}
+"""CLI flag -> the config field it sets."""
 
 
 def build_config(args: argparse.Namespace) -> Config:
+    given = lambda name: getattr(args, name) if getattr(args, name) is not None else DEFAULTS[name]
+    algo = given("algo")
+    overrides = {"env": given("env"), "algo": algo, "seeds": given("seeds")}
+    overrides["episodes"] = given("episodes")
+    k = _parse_k(given("k"))
+    overrides["k"] = k if ALGORITHMS.get(algo, ALGORITHMS["ldn"]).ld_stop else k[:1] or k
+    for flag in ("workers", "threshold", "chunk"):
+        if getattr(args, flag) is not None:
+            overrides[CONFIG_FLAGS[flag]] = getattr(args, flag)
     try:
-        k = tuple(float(v) for v in args.k.split(",") if v.strip())
-    except ValueError:
-        raise UsageError(f"--k must be comma-separated numbers, got {args.k!r}") from None
-    overrides = {"env": args.env, "algo": args.algo, "seeds": args.seeds, "episodes": args.episodes}
-    overrides["k"] = k if ALGORITHMS.get(args.algo, ALGORITHMS["ldn"]).ld_stop else k[:1] or k
-    for name, value in (("workers", args.workers), ("chunk_iterations", args.chunk)):
-        if value is not None:
-            overrides[name] = value
-    if args.threshold is not None:
-        overrides["threshold"] = args.threshold
-    if args.checkpoint_every < 0:
-        raise UsageError("--checkpoint-every must be >= 0")
-    try:
-        return validate(from_preset(args.preset, **overrides))
+        return validate(from_preset(given("preset"), **overrides))
     except ValueError as error:
         raise UsageError(str(error)) from None
+
+
+def _parse_k(text: str) -> tuple[float, ...]:
+    try:
+        return tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise UsageError(f"--k must be comma-separated numbers, got {text!r}") from None
+
+
+def read_run_config(run_dir: Path) -> Config:
+    """The config of an existing run directory, or a one-line `UsageError`."""
+    path = run_dir / "config.json"
+    if not path.is_file():
+        raise UsageError(f"{run_dir} holds no run (no config.json)")
+    try:
+        data = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as error:
+        raise UsageError(f"{path} is corrupt: {error}") from None
+    if not isinstance(data, dict) or data.get("run_format") != RUN_FORMAT:
+        found = data.get("run_format") if isinstance(data, dict) else None
+        raise UsageError(
+            f"{run_dir} was written by another ldn-jax version (run format {found}, "
+            f"this version reads {RUN_FORMAT})"
+        )
+    try:
+        return validate(Config.from_dict(data))
+    except (TypeError, ValueError) as error:
+        raise UsageError(f"{path} does not describe a valid run: {error}") from None
+
+
+def check_resume_flags(args: argparse.Namespace, config: Config) -> None:
+    """Flags given with `--resume` must agree with the stored config."""
+    for flag, field in CONFIG_FLAGS.items():
+        value = getattr(args, flag)
+        if value is None:
+            continue
+        stored = getattr(config, field)
+        if flag == "k":
+            value = _parse_k(value)
+            stored = tuple(stored)
+            if not config.algorithm.ld_stop:
+                value = value[:1]
+        if value != stored:
+            raise UsageError(
+                f"--{flag} {getattr(args, flag)} does not match the run being resumed "
+                f"({field} = {stored}); drop the flag to resume"
+            )
+    if args.out is not None and Path(args.out).resolve() != Path(args.resume).resolve():
+        raise UsageError("--out and --resume name different directories; give --resume alone")
 
 
 def prepare_out(args: argparse.Namespace, config: Config) -> Path:
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out = Path(args.out) if args.out else Path("runs") / f"{config.env}-{config.algo}-{stamp}"
     if (out / "config.json").exists():
-        raise UsageError(f"{out} already holds a run; choose another --out")
+        raise UsageError(f"{out} already holds a run; choose another --out or --resume {out}")
     try:
         out.mkdir(parents=True, exist_ok=True)
         probe = out / ".write-test"
@@ -95,8 +171,16 @@ def prepare_out(args: argparse.Namespace, config: Config) -> Path:
 
 def write_json(path: Path, data: dict) -> None:
     """Write atomically: a reader sees the old file or the new one, never half of one."""
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2) + "\n")
+    write_atomic(path, (json.dumps(data, indent=2) + "\n").encode())
+
+
+def write_atomic(path: Path, data: bytes) -> None:
+    """Write to a temporary file, flush it to disk, then rename it over `path`."""
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
     os.replace(tmp, path)
 
 
@@ -104,8 +188,14 @@ LOSS_SUFFIXES = ("_loss", "_entropy", "_approx_kl", "_clip_fraction")
 """Metrics written under "losses" in metrics.jsonl."""
 
 
-def metric_lines(config: Config, metrics: dict, wall_seconds: float) -> list[str]:
-    """One JSON line per K, seed and iteration of a chunk's metrics `[K, S, N, ...]`."""
+def metric_lines(
+    config: Config, metrics: dict, wall_seconds: float, first_iteration: int
+) -> list[str]:
+    """One JSON line per K, seed and iteration of a chunk's metrics `[K, S, N, ...]`.
+
+    `iteration` counts the host's iterations from `first_iteration`, so a run frozen by the
+    non-finite guard still numbers its lines like the others.
+    """
     lines = []
     losses = [name for name in metrics if name.endswith(LOSS_SUFFIXES)]
     n_k, seeds, n_iter = metrics["iteration"].shape
@@ -114,7 +204,7 @@ def metric_lines(config: Config, metrics: dict, wall_seconds: float) -> list[str
             for i in range(n_iter):
                 at = lambda name, index=(ki, seed, i): metrics[name][index]
                 line = {
-                    "iteration": int(at("iteration")),
+                    "iteration": first_iteration + i,
                     "seed": seed,
                     "k": config.k[ki],
                     "episodes": int(at("episodes")),
@@ -164,56 +254,226 @@ class Progress:
             self.bar.stop()
 
 
-def train(config: Config, out: Path, checkpoint_every: int, quiet: bool) -> dict:
+RUN_FORMAT = 1
+"""Version of the run-directory layout (config.json, checkpoints); resume refuses others."""
+
+KEEP_CHECKPOINTS = 2
+"""Chunk checkpoints kept on disk (the newest ones); `final` is always kept."""
+
+
+class Interrupted(Exception):
+    """Training stopped on request after a checkpoint; `--resume` continues it."""
+
+    def __init__(self, signum: int, chunks_done: int, chunks: int):
+        super().__init__(f"stopped after chunk {chunks_done}/{chunks}")
+        self.signum, self.chunks_done, self.chunks = signum, chunks_done, chunks
+
+
+class Stop:
+    """SIGINT/SIGTERM set a flag; the loop finishes its chunk, checkpoints and stops.
+
+    A second signal acts at once (the default handler), for a user who cannot wait.
+    """
+
+    def __init__(self):
+        self.signum: int | None = None
+
+    def install(self) -> Stop:
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signum, self._handle)
+        return self
+
+    def _handle(self, signum, frame) -> None:
+        self.signum = signum
+        signal.signal(signum, signal.SIG_DFL)
+
+    def requested(self, chunks_done: int) -> bool:
+        return self.signum is not None
+
+
+def checkpoint_paths(out: Path, name: str) -> tuple[Path, Path]:
+    """The orbax directory of a checkpoint and the host file (history, timings) beside it."""
+    return out / "checkpoints" / name, out / "checkpoints" / f"{name}.host.npz"
+
+
+def save_checkpoint(out: Path, name: str, states, history: dict, session: dict) -> None:
+    """The training state (orbax, atomic), then the host file (atomic): a checkpoint counts
+    only once its host file exists, so a kill between the two loses nothing but time."""
+    state_dir, host_file = checkpoint_paths(out, name)
+    checkpoint.save(state_dir, states)
+    buffer = io.BytesIO()
+    arrays = {f"history/{n}": np.concatenate(v, axis=2) for n, v in history.items() if v}
+    np.savez(buffer, session=np.asarray(json.dumps(session)), **arrays)
+    write_atomic(host_file, buffer.getvalue())
+    chunk_names = sorted(p.name for p in (out / "checkpoints").glob("chunk_?????") if p.is_dir())
+    for old in chunk_names[:-KEEP_CHECKPOINTS]:
+        old_dir, old_host = checkpoint_paths(out, old)
+        old_host.unlink(missing_ok=True)
+        shutil.rmtree(old_dir, ignore_errors=True)
+
+
+def latest_checkpoint(out: Path) -> str | None:
+    """The newest complete checkpoint's name (`final` first), or None."""
+    names = sorted(p.name for p in (out / "checkpoints").glob("chunk_?????") if p.is_dir())
+    for name in [FINAL_CHECKPOINT, *reversed(names)]:
+        state_dir, host_file = checkpoint_paths(out, name)
+        if state_dir.is_dir() and host_file.is_file():
+            return name
+    return None
+
+
+def load_checkpoint(out: Path, name: str, like) -> tuple[object, dict, dict]:
+    """`(states, history, session)` of a checkpoint, or a one-line `UsageError`."""
+    state_dir, host_file = checkpoint_paths(out, name)
+    try:
+        with np.load(host_file) as host:
+            session = json.loads(str(host["session"]))
+            history = {
+                n.split("/", 1)[1]: [host[n]] for n in host.files if n.startswith("history/")
+            }
+        states = checkpoint.restore(state_dir, like)
+    except Exception as error:  # orbax, numpy and zipfile raise many kinds for a bad file
+        reason = str(error).splitlines()[0][:160] if str(error) else type(error).__name__
+        raise UsageError(
+            f"checkpoint {state_dir} is unreadable ({reason}); delete it and its "
+            f"{host_file.name} to resume from an earlier checkpoint"
+        ) from None
+    return states, history, session
+
+
+def _remove_partial_checkpoints(out: Path) -> None:
+    """Delete what a killed save left: orbax's temporary directories, our `.tmp` files."""
+    for partial in (out / "checkpoints").glob("*tmp*"):
+        if partial.is_dir():
+            shutil.rmtree(partial, ignore_errors=True)
+        else:
+            partial.unlink(missing_ok=True)
+
+
+def truncate_metrics(path: Path, iterations: int) -> None:
+    """Keep the metrics lines up to `iterations` (and no half-written line); atomic."""
+    if not path.exists():
+        return
+    kept = []
+    for line in path.read_text().splitlines():
+        try:
+            if json.loads(line)["iteration"] <= iterations:
+                kept.append(line)
+        except (json.JSONDecodeError, KeyError, TypeError):
+            continue
+    write_atomic(path, "".join(f"{line}\n" for line in kept).encode())
+
+
+def train(
+    config: Config,
+    out: Path,
+    checkpoint_every: int,
+    quiet: bool,
+    stop: Stop | None = None,
+    resume: bool = False,
+) -> dict:
+    """Train (or, with `resume`, continue) the run in `out`; returns the summary.
+
+    Raises `Interrupted` after checkpointing when `stop` asks for it between chunks.
+    """
+    stop = stop or Stop()
     trainer = Trainer(config)
-    write_json(out / "config.json", config.to_dict())
-    states = trainer.init_batch()
-    k = trainer.k_values()
+    like = jax.eval_shape(trainer.init_batch)
     chunks = config.iterations // config.chunk_iterations
-    progress = Progress(config.iterations * config.workers, quiet)
-
-    start = time.perf_counter()
-    chunk_fn = trainer.batched_chunk().lower(states, k).compile()
-    compile_seconds = time.perf_counter() - start
-
     history: dict[str, list[np.ndarray]] = {}
-    train_seconds = 0.0
-    chunk_ends = []
-    with open(out / "metrics.jsonl", "a") as log:
-        for chunk in range(chunks):
-            t0 = time.perf_counter()
-            states, metrics = chunk_fn(states, k)
-            metrics = jax.device_get(metrics)
-            train_seconds += time.perf_counter() - t0
-            chunk_ends.append(train_seconds)
-            for name, value in metrics.items():
-                history.setdefault(name, []).append(value)
-            log.write("\n".join(metric_lines(config, metrics, train_seconds)) + "\n")
-            log.flush()
-            episodes = int(metrics["episodes"][0, 0, -1])
-            steps = int(metrics["env_steps"].sum(axis=(0, 1))[-1])
-            status = f"moving return {metrics['moving_return'][..., -1].mean():7.1f}"
-            if "ld_mean" in metrics:
-                status += f"  LD {np.nanmean(metrics['ld_mean'][..., -1]):.3f}"
-            status += f"  {steps / train_seconds:,.0f} env steps/s"
-            progress.update(episodes, status)
-            if checkpoint_every and (chunk + 1) % checkpoint_every == 0 and chunk + 1 < chunks:
-                checkpoint.save(out / "checkpoints" / f"chunk_{chunk + 1:05d}", states)
-    progress.stop()
+    session = {"chunks_done": 0, "chunk_ends": [], "compile_seconds": None, "resumes": 0}
+    if resume:
+        _remove_partial_checkpoints(out)
+    found = latest_checkpoint(out) if resume else None
+    if found is not None:
+        states, history, session = load_checkpoint(out, found, like)
+        session["resumes"] += 1
+    else:
+        write_json(out / "config.json", {"run_format": RUN_FORMAT, **config.to_dict()})
+        states = trainer.init_batch()
+    truncate_metrics(out / "metrics.jsonl", session["chunks_done"] * config.chunk_iterations)
+    reported = _report_failures(config, history, set())
+    k = trainer.k_values()
 
-    checkpoint.save(out / "checkpoints" / FINAL_CHECKPOINT, states)
+    if session["chunks_done"] < chunks:
+        progress = Progress(config.iterations * config.workers, quiet)
+        progress.update(
+            session["chunks_done"] * config.chunk_iterations * config.workers, "compiling..."
+        )
+        start = time.perf_counter()
+        chunk_fn = trainer.batched_chunk().lower(states, k).compile()
+        if session["compile_seconds"] is None:
+            session["compile_seconds"] = time.perf_counter() - start
+        train_seconds = session["chunk_ends"][-1] if session["chunk_ends"] else 0.0
+        with open(out / "metrics.jsonl", "a") as log:
+            for chunk in range(session["chunks_done"], chunks):
+                t0 = time.perf_counter()
+                states, metrics = chunk_fn(states, k)
+                metrics = jax.device_get(metrics)
+                train_seconds += time.perf_counter() - t0
+                session["chunk_ends"].append(train_seconds)
+                session["chunks_done"] = chunk + 1
+                for name, value in metrics.items():
+                    history.setdefault(name, []).append(value)
+                first = chunk * config.chunk_iterations + 1
+                log.write("\n".join(metric_lines(config, metrics, train_seconds, first)) + "\n")
+                log.flush()
+                reported = _report_failures(config, {"failure": [metrics["failure"]]}, reported)
+                progress.update(
+                    session["chunks_done"] * config.chunk_iterations * config.workers,
+                    _status(metrics, train_seconds),
+                )
+                last = chunk + 1 == chunks
+                due = checkpoint_every and (chunk + 1) % checkpoint_every == 0
+                if not last and (due or stop.requested(chunk + 1)):
+                    save_checkpoint(out, f"chunk_{chunk + 1:05d}", states, history, session)
+                if not last and stop.requested(chunk + 1):
+                    progress.stop()
+                    raise Interrupted(stop.signum or signal.SIGINT, chunk + 1, chunks)
+        progress.stop()
+        save_checkpoint(out, FINAL_CHECKPOINT, states, history, session)
+
     eval_returns = jax.device_get(
         trainer.batched_evaluate()(states, jax.random.key(config.seeds + 10_000))
     )
     history = {name: np.concatenate(parts, axis=2) for name, parts in history.items()}
-    summary = summarize(config, history, eval_returns, chunk_ends, compile_seconds, train_seconds)
+    summary = summarize(config, history, eval_returns, states, session)
     write_json(out / "summary.json", summary)
     plot(config, history, out / "curves.png")
     return summary
 
 
-def summarize(config, history, eval_returns, chunk_ends, compile_seconds, train_seconds) -> dict:
+def _status(metrics: dict, train_seconds: float) -> str:
+    steps = int(metrics["env_steps"].sum(axis=(0, 1))[-1])
+    status = f"moving return {np.nanmean(metrics['moving_return'][..., -1]):7.1f}"
+    if "ld_mean" in metrics:
+        status += f"  LD {np.nanmean(metrics['ld_mean'][..., -1]):.3f}"
+    return status + f"  {steps / max(train_seconds, 1e-9):,.0f} env steps/s"
+
+
+def _report_failures(config: Config, history: dict, reported: set) -> set:
+    """Print one stderr line per run that newly became non-finite; returns all reported."""
+    if not history.get("failure"):
+        return reported
+    failure = history["failure"][-1][..., -1]
+    for ki, seed in zip(*np.nonzero(failure), strict=True):
+        if (ki, seed) not in reported:
+            what = ", ".join(failure_names(int(failure[ki, seed])))
+            print(
+                f"warning: seed {seed} K={config.k[ki]:g}: non-finite {what}; this run is "
+                "frozen at its last finite state, the others go on",
+                file=sys.stderr,
+            )
+            reported = reported | {(ki, seed)}
+    return reported
+
+
+def summarize(config, history, eval_returns, states, session) -> dict:
     threshold = config.resolved_threshold
+    chunk_ends = session["chunk_ends"]
+    train_seconds = chunk_ends[-1]
+    failure = np.asarray(states.failure)
+    failed_iteration = np.asarray(states.failed_iteration)
     total_steps = int(history["env_steps"][..., -1].sum())
     runs = []
     per_chunk = config.chunk_iterations
@@ -240,18 +500,25 @@ def summarize(config, history, eval_returns, chunk_ends, compile_seconds, train_
                     "episodes_to_threshold": crossing[0] if crossing else None,
                     "env_steps_to_threshold": crossing[1] if crossing else None,
                     "seconds_to_threshold": round(seconds, 3) if seconds else None,
-                    "final_moving_return": float(history["moving_return"][ki, seed, -1]),
+                    "final_moving_return": _finite_or_none(history["moving_return"][ki, seed, -1]),
                     "eval_return": float(eval_returns[ki, seed]),
+                    "diverged": None
+                    if failure[ki, seed] == 0
+                    else {
+                        "iteration": int(failed_iteration[ki, seed]),
+                        "quantities": failure_names(int(failure[ki, seed])),
+                    },
                 }
             )
     return {
         "env": config.env,
         "algo": config.algo,
         "threshold": threshold,
-        "compile_seconds": round(compile_seconds, 3),
+        "compile_seconds": round(session["compile_seconds"], 3),
         "train_seconds": round(train_seconds, 3),
         "env_steps_per_second": round(total_steps / train_seconds, 1),
         "imagined_steps": int(history["imagined_steps"][..., -1].sum()),
+        "resumes": session["resumes"],
         "runs": runs,
     }
 
@@ -271,12 +538,27 @@ def plot(config: Config, history: dict, path: Path) -> None:
 def main(argv: list[str] | None = None) -> int:
     try:
         args = parse_args(argv)
-        config = build_config(args)
-        out = prepare_out(args, config)
+        if args.resume:
+            out = Path(args.resume)
+            config = read_run_config(out)
+            check_resume_flags(args, config)
+        else:
+            config = build_config(args)
+            out = prepare_out(args, config)
+        summary = train(
+            config, out, args.checkpoint_every, args.quiet, Stop().install(), bool(args.resume)
+        )
     except UsageError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    summary = train(config, out, args.checkpoint_every, args.quiet)
+    except Interrupted as stopped:
+        name = signal.Signals(stopped.signum).name
+        print(
+            f"{name}: stopped after chunk {stopped.chunks_done}/{stopped.chunks}, checkpoint "
+            f"and metrics written. Resume with:\n  python experiments/run.py --resume {out}",
+            file=sys.stderr,
+        )
+        return 128 + stopped.signum
     reached = [r for r in summary["runs"] if r["episodes_to_threshold"] is not None]
     print(
         f"{config.env} {config.algo}: {len(reached)}/{len(summary['runs'])} runs reached "
@@ -284,6 +566,9 @@ def main(argv: list[str] | None = None) -> int:
         f"train {summary['train_seconds']:.1f}s, "
         f"{summary['env_steps_per_second']:,.0f} env steps/s"
     )
+    diverged = [r for r in summary["runs"] if r["diverged"]]
+    if diverged:
+        print(f"{len(diverged)} run(s) diverged and were frozen: see summary.json", file=sys.stderr)
     print(f"curves:  {out / 'curves.png'}\nsummary: {out / 'summary.json'}")
     return 0
 

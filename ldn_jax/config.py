@@ -156,6 +156,7 @@ class Config:
     @classmethod
     def from_dict(cls, data: dict) -> Config:
         data = dict(data)
+        data.pop("run_format", None)  # the run directory's format version, not a setting
         agent = AgentConfig(**data.pop("agent", {}))
         model = ModelConfig(**data.pop("model", {}))
         data["k"] = tuple(data.get("k", (1.0,)))

@@ -42,6 +42,32 @@ class TrainState:
     imagined_steps: Array
     iteration: Array
     key: Array
+    failure: Array
+    """0 while every quantity is finite; else the `FAILURES` bits of what first became
+    non-finite. A failed run is frozen at its last finite state."""
+    failed_iteration: Array
+    """The iteration whose result was non-finite (0 if none)."""
+
+
+FAILURES = (
+    "actor-critic parameters",
+    "model parameters",
+    "real-stage losses",
+    "model loss",
+    "imagined-stage losses or returns",
+    "episode returns",
+)
+"""What the non-finite guard checks, in the order of the bits of `TrainState.failure`."""
+
+
+def failure_names(failure: int) -> list[str]:
+    """The names of the quantities whose bits are set in a `TrainState.failure` value."""
+    return [name for bit, name in enumerate(FAILURES) if failure >> bit & 1]
+
+
+def _all_finite(tree) -> Array:
+    leaves = [jnp.isfinite(x).all() for x in jax.tree.leaves(tree)]
+    return jnp.stack(leaves).all() if leaves else jnp.ones((), bool)
 
 
 class Trainer:
@@ -80,6 +106,8 @@ class Trainer:
             imagined_steps=zero,
             iteration=zero,
             key=key,
+            failure=zero,
+            failed_iteration=zero,
         )
 
     # -- stages ----------------------------------------------------------------------------
@@ -138,7 +166,46 @@ class Trainer:
     # -- one iteration and a chunk of them -------------------------------------------------
 
     def iteration(self, state: TrainState, k: Array) -> tuple[TrainState, dict]:
-        """One iteration of Algorithm 1 for every worker; returns per-iteration metrics."""
+        """One iteration of Algorithm 1 for every worker; returns per-iteration metrics.
+
+        If the iteration makes any checked quantity non-finite, the run keeps its previous
+        state from then on (frozen) and `failure` says what diverged; other vmapped runs go on.
+        """
+        new, metrics = self._iteration(state, k)
+        failure = self._failure(new, metrics)
+        first = (state.failure == 0) & (failure != 0)
+        frozen = (state.failure != 0) | first
+        kept = jax.tree.map(lambda n, o: jnp.where(frozen, o, n), new, state)
+        state = kept.replace(
+            failure=jnp.where(first, failure, state.failure),
+            failed_iteration=jnp.where(first, new.iteration, state.failed_iteration),
+        )
+        metrics["moving_after"] = jnp.where(frozen, state.moving_return, metrics["moving_after"])
+        metrics.update(
+            moving_return=state.moving_return,
+            episodes=state.episodes,
+            env_steps=state.env_steps,
+            imagined_steps=state.imagined_steps,
+            iteration=state.iteration,
+            failure=state.failure,
+        )
+        return state, metrics
+
+    def _failure(self, state: TrainState, metrics: dict) -> Array:
+        """The `FAILURES` bits of the quantities of one iteration that are not all finite."""
+        stage = lambda prefix: {n: v for n, v in metrics.items() if n.startswith(prefix)}
+        checks = [
+            state.learner.params,
+            state.model.params if state.model is not None else (),
+            stage("real_"),
+            metrics.get("model_loss", ()),
+            stage("imagined_"),
+            metrics["returns"],
+        ]
+        bad = jnp.stack([~_all_finite(tree) for tree in checks])
+        return (bad.astype(jnp.int32) << jnp.arange(len(checks))).sum()
+
+    def _iteration(self, state: TrainState, k: Array) -> tuple[TrainState, dict]:
         key, k_real, k_model, k_imagine = jax.random.split(state.key, 4)
         state, real = self.real_stage(state, k_real)
 
@@ -178,13 +245,6 @@ class Trainer:
             imagined_steps=state.imagined_steps + imagined_steps,
             iteration=state.iteration + 1,
             key=key,
-        )
-        metrics.update(
-            moving_return=moving,
-            episodes=state.episodes,
-            env_steps=state.env_steps,
-            imagined_steps=state.imagined_steps,
-            iteration=state.iteration,
         )
         return state, metrics
 

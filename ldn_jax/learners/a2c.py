@@ -50,8 +50,10 @@ class A2C(ActorCritic):
 
     def __init__(self, config: AgentConfig, obs_size: int, n_actions: int):
         super().__init__(config, obs_size, n_actions)
-        rmsprop = lambda lr: optax.rmsprop(
-            lr,
+        # Hyperparameters injected into the optimiser state are arrays, so a learning rate
+        # can differ between vmapped runs.
+        rmsprop = lambda lr: optax.inject_hyperparams(optax.rmsprop)(
+            learning_rate=lr,
             decay=config.rmsprop_decay,
             eps=config.rmsprop_eps,
             initial_scale=1.0,  # TensorFlow 1's RMSProp starts its average at one

@@ -86,7 +86,10 @@ class PPO(ActorCritic):
         self.optimizer = optax.chain(
             optax.clip_by_global_norm(config.max_grad_norm),
             optax.multi_transform(
-                {"actor": optax.adam(config.actor_lr), "critic": optax.adam(config.critic_lr)},
+                {
+                    "actor": optax.inject_hyperparams(optax.adam)(learning_rate=config.actor_lr),
+                    "critic": optax.inject_hyperparams(optax.adam)(learning_rate=config.critic_lr),
+                },
                 {"actor": "actor", "critic": "critic"},
             ),
         )
