@@ -20,6 +20,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import envs
+from experiments.loggers import LOGGERS, Logger, NullLogger, make_logger
 from experiments.plots import learning_curves
 from ldn_jax import checkpoint
 from ldn_jax.config import ALGORITHMS, PRESETS, Config, from_preset, validate
@@ -55,6 +56,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--checkpoint-every", type=int, default=20, help="chunks between checkpoints (0: end only)"
     )
     p.add_argument("--quiet", action="store_true", help="no live progress display")
+    p.add_argument("--logger", default="none", choices=LOGGERS, help="extra metric sink")
     return p.parse_args(argv)
 
 
@@ -164,7 +166,10 @@ class Progress:
             self.bar.stop()
 
 
-def train(config: Config, out: Path, checkpoint_every: int, quiet: bool) -> dict:
+def train(
+    config: Config, out: Path, checkpoint_every: int, quiet: bool, logger: Logger | None = None
+) -> dict:
+    logger = logger or NullLogger()
     trainer = Trainer(config)
     write_json(out / "config.json", config.to_dict())
     states = trainer.init_batch()
@@ -190,6 +195,7 @@ def train(config: Config, out: Path, checkpoint_every: int, quiet: bool) -> dict
                 history.setdefault(name, []).append(value)
             log.write("\n".join(metric_lines(config, metrics, train_seconds)) + "\n")
             log.flush()
+            logger.log(config, metrics, train_seconds)
             episodes = int(metrics["episodes"][0, 0, -1])
             steps = int(metrics["env_steps"].sum(axis=(0, 1))[-1])
             status = f"moving return {metrics['moving_return'][..., -1].mean():7.1f}"
@@ -200,6 +206,7 @@ def train(config: Config, out: Path, checkpoint_every: int, quiet: bool) -> dict
             if checkpoint_every and (chunk + 1) % checkpoint_every == 0 and chunk + 1 < chunks:
                 checkpoint.save(out / "checkpoints" / f"chunk_{chunk + 1:05d}", states)
     progress.stop()
+    logger.close()
 
     checkpoint.save(out / "checkpoints" / FINAL_CHECKPOINT, states)
     eval_returns = jax.device_get(
@@ -273,10 +280,11 @@ def main(argv: list[str] | None = None) -> int:
         args = parse_args(argv)
         config = build_config(args)
         out = prepare_out(args, config)
-    except UsageError as error:
+        logger = make_logger(args.logger, out)
+    except (UsageError, ValueError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    summary = train(config, out, args.checkpoint_every, args.quiet)
+    summary = train(config, out, args.checkpoint_every, args.quiet, logger)
     reached = [r for r in summary["runs"] if r["episodes_to_threshold"] is not None]
     print(
         f"{config.env} {config.algo}: {len(reached)}/{len(summary['runs'])} runs reached "
