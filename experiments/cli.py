@@ -117,13 +117,11 @@ def _episode_returns(env: gymnasium.Env, act, args: argparse.Namespace, k: float
 def _record(path: Path, env: str, result: dict) -> None:
     """Add `result` to eval.json, replacing an earlier evaluation of the same seed and K."""
     try:
-        runs = json.loads(path.read_text())["runs"]
+        runs = [r for r in json.loads(path.read_text())["runs"] if isinstance(r, dict)]
     except (OSError, ValueError, KeyError, TypeError):
-        runs = []
-    same = lambda r: (
-        isinstance(r, dict) and (r.get("seed"), r.get("k")) == (result["seed"], result["k"])
-    )
-    runs = [r for r in runs if not same(r)] if isinstance(runs, list) else []
+        runs = []  # none yet, or unreadable: start afresh
+    key = (result["seed"], result["k"])
+    runs = [r for r in runs if (r.get("seed"), r.get("k")) != key]
     data = {"env": env, "gymnasium": gym_eval.gymnasium_name(env), "runs": [*runs, result]}
     write_json(path, data)
 
