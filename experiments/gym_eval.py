@@ -7,6 +7,7 @@ are gymnasium's `CartPoleEnv` with our step limit and force table (v2: the paper
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from pathlib import Path
 
@@ -60,6 +61,9 @@ def gymnasium_name(env: str) -> str:
 
 def make_env(env: str, render_mode: str | None = None) -> gymnasium.Env:
     """The gymnasium env matching our env `env`. Raises ValueError for a name with none."""
+    if render_mode == "rgb_array":
+        # Offscreen frames need no display; without this, SDL looks for one and complains.
+        os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
     if env in CUSTOM_CARTPOLES:
         _, params = envs.make(env)
         base = ForceTable(CartPoleEnv(render_mode=render_mode), params.forces)

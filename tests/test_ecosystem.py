@@ -144,6 +144,18 @@ def test_plot_overlays_two_runs(ldn_run, a2c_run, tmp_path, monkeypatch):
     assert (tmp_path / "comparison.png").stat().st_size > 0
 
 
+def test_eval_video_is_written_or_refused_in_one_line(ldn_run, tmp_path, capsys):
+    videos = tmp_path / "videos"
+    code = entry_point()(["eval", str(ldn_run), "--episodes", "1", "--video", str(videos)])
+    try:
+        import moviepy  # noqa: F401
+    except ImportError:  # the `video` extra is not installed
+        err = capsys.readouterr().err
+        assert code == 2 and err.count("\n") == 1 and err.startswith("error: --video failed"), err
+    else:
+        assert code == 0 and [p.suffix for p in videos.iterdir()] == [".mp4"]
+
+
 def read_scalars(log_dir: Path) -> dict[str, list[tuple[int, float]]]:
     """`{tag: [(step, value), ...]}` from TFRecord event files, checking every CRC."""
     from tensorboardX.proto.event_pb2 import Event
