@@ -1,7 +1,8 @@
-"""Figures written into run directories."""
+"""Figures: learning curves written into run directories, and comparisons across runs."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import matplotlib
@@ -10,6 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from ldn_jax.config import ALGORITHMS, Config
 from ldn_jax.metrics import mean_band
 
 
@@ -38,3 +40,63 @@ def learning_curves(
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
+
+
+def run_curves(run_dir: Path, name: str) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], Config]:
+    """Moving return vs episodes of one run directory: `{label: (episodes [T], returns [S, T])}`
+    with a label `name: algo K=k` per K (K left out where it does not matter), and its config.
+
+    Raises ValueError with a one-line message for a missing or unreadable run.
+    """
+    if not run_dir.is_dir():
+        raise ValueError(f"no such run directory: {run_dir}")
+    try:
+        config, points = _read_run(run_dir)
+    except FileNotFoundError as error:
+        raise ValueError(
+            f"{run_dir} is not a run directory: no {Path(error.filename).name}"
+        ) from None
+    except (OSError, ValueError, TypeError, KeyError) as error:
+        raise ValueError(f"{run_dir}: unreadable config.json or metrics.jsonl ({error})") from None
+    show_k = len(config.k) > 1 or ALGORITHMS.get(config.algo, ALGORITHMS["ldn"]).ld_stop
+    curves = {}
+    for k, by_seed in points.items():
+        # Iterations every seed has logged: a run still training may be ahead in some seeds.
+        iterations = sorted(set.intersection(*(set(logged) for logged in by_seed.values())))
+        if not iterations:
+            continue
+        any_seed = next(iter(by_seed.values()))
+        episodes = np.array([any_seed[i][0] for i in iterations])
+        returns = np.array([[logged[i][1] for i in iterations] for logged in by_seed.values()])
+        curves[f"{name}: {config.algo}" + (f" K={k:g}" if show_k else "")] = (episodes, returns)
+    if not curves:
+        raise ValueError(f"{run_dir} has no metrics yet")
+    return curves, config
+
+
+def _read_run(run_dir: Path) -> tuple[Config, dict[float, dict[int, dict[int, tuple]]]]:
+    """config.json, and metrics.jsonl as `{k: {seed: {iteration: (episodes, moving_return)}}}`.
+
+    An iteration logged twice (a resumed run) counts once, its last line winning.
+    """
+    config = Config.from_dict(json.loads((run_dir / "config.json").read_text()))
+    points: dict[float, dict[int, dict[int, tuple]]] = {}
+    with open(run_dir / "metrics.jsonl") as lines:
+        for text in lines:
+            if text.strip():
+                line = json.loads(text)
+                logged = points.setdefault(line["k"], {}).setdefault(line["seed"], {})
+                logged[line["iteration"]] = (line["episodes"], line["moving_return"])
+    return config, points
+
+
+def compare_runs(run_dirs: list[Path], path: Path) -> None:
+    """Overlay runs in one figure (see `learning_curves`); raises ValueError for a bad run."""
+    curves, configs = {}, []
+    for run_dir in run_dirs:
+        run, config = run_curves(run_dir, str(run_dir))
+        curves.update(run)
+        configs.append(config)
+    thresholds = {config.resolved_threshold for config in configs}
+    title = " / ".join(dict.fromkeys(config.env for config in configs))
+    learning_curves(curves, path, title, thresholds.pop() if len(thresholds) == 1 else None)

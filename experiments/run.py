@@ -8,6 +8,7 @@ Writes config.json, metrics.jsonl, summary.json, curves.png and checkpoints/ int
 from __future__ import annotations
 
 import argparse
+import hashlib
 import io
 import json
 import os
@@ -23,6 +24,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import envs
+from experiments.loggers import LOGGERS, Logger, NullLogger, make_logger
 from experiments.plots import learning_curves
 from ldn_jax import checkpoint
 from ldn_jax.config import ALGORITHMS, PRESETS, Config, from_preset, validate
@@ -69,6 +71,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--checkpoint-every", type=int, default=20, help="chunks between checkpoints (0: end only)"
     )
     p.add_argument("--quiet", action="store_true", help="no live progress display")
+    p.add_argument("--logger", default="none", choices=LOGGERS, help="extra metric sink")
     args = p.parse_args(argv)
     if args.checkpoint_every < 0:
         raise UsageError("--checkpoint-every must be >= 0")
@@ -303,13 +306,26 @@ def save_checkpoint(out: Path, name: str, states, history: dict, session: dict) 
     checkpoint.save(state_dir, states)
     buffer = io.BytesIO()
     arrays = {f"history/{n}": np.concatenate(v, axis=2) for n, v in history.items() if v}
-    np.savez(buffer, session=np.asarray(json.dumps(session)), **arrays)
+    manifest = json.dumps(_manifest(state_dir))
+    np.savez(
+        buffer, session=np.asarray(json.dumps(session)), manifest=np.asarray(manifest), **arrays
+    )
     write_atomic(host_file, buffer.getvalue())
     chunk_names = sorted(p.name for p in (out / "checkpoints").glob("chunk_?????") if p.is_dir())
     for old in chunk_names[:-KEEP_CHECKPOINTS]:
         old_dir, old_host = checkpoint_paths(out, old)
         old_host.unlink(missing_ok=True)
         shutil.rmtree(old_dir, ignore_errors=True)
+
+
+def _manifest(state_dir: Path) -> dict[str, str]:
+    """SHA-256 of every file orbax wrote, so that resume can tell a damaged checkpoint
+    before orbax reads it (orbax's own errors on a truncated file are not one line)."""
+    return {
+        str(path.relative_to(state_dir)): hashlib.sha256(path.read_bytes()).hexdigest()
+        for path in sorted(state_dir.rglob("*"))
+        if path.is_file()
+    }
 
 
 def latest_checkpoint(out: Path) -> str | None:
@@ -328,9 +344,14 @@ def load_checkpoint(out: Path, name: str, like) -> tuple[object, dict, dict]:
     try:
         with np.load(host_file) as host:
             session = json.loads(str(host["session"]))
+            manifest = json.loads(str(host["manifest"]))
             history = {
                 n.split("/", 1)[1]: [host[n]] for n in host.files if n.startswith("history/")
             }
+        found = _manifest(state_dir)
+        damaged = sorted(f for f in manifest if found.get(f) != manifest[f])
+        if damaged:
+            raise ValueError(f"{damaged[0]} is missing or differs from what was written")
         states = checkpoint.restore(state_dir, like)
     except Exception as error:  # orbax, numpy and zipfile raise many kinds for a bad file
         reason = str(error).splitlines()[0][:160] if str(error) else type(error).__name__
@@ -371,12 +392,14 @@ def train(
     quiet: bool,
     stop: Stop | None = None,
     resume: bool = False,
+    logger: Logger | None = None,
 ) -> dict:
     """Train (or, with `resume`, continue) the run in `out`; returns the summary.
 
     Raises `Interrupted` after checkpointing when `stop` asks for it between chunks.
     """
     stop = stop or Stop()
+    logger = logger or NullLogger()
     trainer = Trainer(config)
     like = jax.eval_shape(trainer.init_batch)
     chunks = config.iterations // config.chunk_iterations
@@ -418,6 +441,7 @@ def train(
                 first = chunk * config.chunk_iterations + 1
                 log.write("\n".join(metric_lines(config, metrics, train_seconds, first)) + "\n")
                 log.flush()
+                logger.log(config, metrics, train_seconds)
                 reported = _report_failures(config, {"failure": [metrics["failure"]]}, reported)
                 progress.update(
                     session["chunks_done"] * config.chunk_iterations * config.workers,
@@ -429,8 +453,10 @@ def train(
                     save_checkpoint(out, f"chunk_{chunk + 1:05d}", states, history, session)
                 if not last and stop.requested(chunk + 1):
                     progress.stop()
+                    logger.close()
                     raise Interrupted(stop.signum or signal.SIGINT, chunk + 1, chunks)
         progress.stop()
+        logger.close()
         save_checkpoint(out, FINAL_CHECKPOINT, states, history, session)
 
     eval_returns = jax.device_get(
@@ -545,8 +571,18 @@ def main(argv: list[str] | None = None) -> int:
         else:
             config = build_config(args)
             out = prepare_out(args, config)
+        try:
+            logger = make_logger(args.logger, out)
+        except ValueError as error:
+            raise UsageError(str(error)) from None
         summary = train(
-            config, out, args.checkpoint_every, args.quiet, Stop().install(), bool(args.resume)
+            config,
+            out,
+            args.checkpoint_every,
+            args.quiet,
+            Stop().install(),
+            bool(args.resume),
+            logger,
         )
     except UsageError as error:
         print(f"error: {error}", file=sys.stderr)

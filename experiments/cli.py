@@ -1,0 +1,148 @@
+"""The `ldn-jax` command: train (the default), evaluate in gymnasium, compare runs.
+
+    ldn-jax --env cartpole-v2 --algo ldn --seeds 5 --k 0.5,1,2   (train: experiments/run.py)
+    ldn-jax eval RUN_DIR [--seed S] [--k K] [--episodes N] [--video DIR]
+    ldn-jax plot RUN_DIR [RUN_DIR ...] [--out PNG]
+
+Bad input gets a one-line error on stderr and exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import gymnasium
+import numpy as np
+
+from experiments import gym_eval, run
+from experiments.plots import compare_runs
+from experiments.run import UsageError, write_json
+from ldn_jax import load_policy
+from ldn_jax.config import Config
+from ldn_jax.policy import FINAL_CHECKPOINT
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):  # one line, not usage + message
+        raise UsageError(message)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the `ldn-jax` console script; returns the exit code."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    commands = {"train": run.main, "eval": evaluate, "plot": plot}
+    if argv and argv[0] in commands:
+        return commands[argv[0]](argv[1:])
+    if argv and argv[0] in ("-h", "--help"):
+        print(__doc__)
+    return run.main(argv)
+
+
+def evaluate(argv: list[str]) -> int:
+    """`ldn-jax eval`: a trained greedy policy in the gymnasium env; writes RUN_DIR/eval.json."""
+    p = _Parser(prog="ldn-jax eval", description=evaluate.__doc__)
+    p.add_argument("run_dir", type=Path, help="a finished run directory")
+    p.add_argument("--seed", type=int, default=0, help="which trained seed (default 0)")
+    p.add_argument("--k", type=float, default=None, help="which K (default: the run's first)")
+    p.add_argument("--episodes", type=int, default=100, help="evaluation episodes")
+    p.add_argument("--env-seed", type=int, default=0, help="seed of the first env reset")
+    p.add_argument("--video", type=Path, default=None, help="save videos (rgb_array) here")
+    try:
+        args = p.parse_args(argv)
+        config, act, k = _load(args)
+        env = gym_eval.make_env(config.env, render_mode="rgb_array" if args.video else None)
+        returns = _episode_returns(env, act, args, k)
+    except (UsageError, ValueError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    mean = float(returns.mean())
+    std = float(returns.std(ddof=1)) if len(returns) > 1 else 0.0
+    result = {
+        "seed": args.seed,
+        "k": k,
+        "episodes": args.episodes,
+        "env_seed": args.env_seed,
+        "mean_return": mean,
+        "std_return": std,
+        "returns": returns.tolist(),
+    }
+    _record(args.run_dir / "eval.json", config.env, result)
+    print(
+        f"{config.env} {config.algo} seed {args.seed} K={k:g} in gymnasium "
+        f"{gym_eval.gymnasium_name(config.env)}: return {mean:.1f} ± {std:.1f} (s.d.) "
+        f"over {args.episodes} episodes -> {args.run_dir / 'eval.json'}"
+    )
+    return 0
+
+
+def _load(args: argparse.Namespace):
+    """`(config, act, k)` of the run, or UsageError."""
+    run_dir = args.run_dir
+    if not run_dir.is_dir():
+        raise UsageError(f"no such run directory: {run_dir}")
+    if args.episodes < 1:
+        raise UsageError(f"--episodes must be >= 1, got {args.episodes}")
+    try:
+        config = Config.from_dict(json.loads((run_dir / "config.json").read_text()))
+    except FileNotFoundError:
+        raise UsageError(f"{run_dir} is not a run directory: no config.json") from None
+    except (OSError, ValueError, TypeError) as error:
+        raise UsageError(f"{run_dir}/config.json is unreadable: {error}") from None
+    if not (run_dir / "checkpoints" / FINAL_CHECKPOINT).is_dir():
+        raise UsageError(f"{run_dir} has no final checkpoint (training not finished?)")
+    act = load_policy(run_dir, args.seed, args.k)  # ValueError names the valid seeds / K
+    k = config.k[0] if args.k is None else next(v for v in config.k if np.isclose(v, args.k))
+    return config, act, k
+
+
+def _episode_returns(env: gymnasium.Env, act, args: argparse.Namespace, k: float) -> np.ndarray:
+    try:
+        if args.video:
+            env = gym_eval.record_video(env, args.video, f"seed{args.seed}_k{k:g}")
+        try:
+            return gym_eval.episode_returns(env, act, args.episodes, args.env_seed)
+        finally:
+            env.close()  # RecordVideo writes its last video here
+    except (gymnasium.error.Error, ImportError, OSError, RuntimeError) as error:
+        if not args.video:
+            raise
+        # Rendering and encoding fail in many ways (no moviepy, no pygame, no ffmpeg).
+        message = str(error).splitlines()[0] if str(error) else type(error).__name__
+        raise UsageError(f"--video failed: {message}") from None
+
+
+def _record(path: Path, env: str, result: dict) -> None:
+    """Add `result` to eval.json, replacing an earlier evaluation of the same seed and K."""
+    try:
+        runs = [r for r in json.loads(path.read_text())["runs"] if isinstance(r, dict)]
+    except (OSError, ValueError, KeyError, TypeError):
+        runs = []  # none yet, or unreadable: start afresh
+    key = (result["seed"], result["k"])
+    runs = [r for r in runs if (r.get("seed"), r.get("k")) != key]
+    data = {"env": env, "gymnasium": gym_eval.gymnasium_name(env), "runs": [*runs, result]}
+    write_json(path, data)
+
+
+def plot(argv: list[str]) -> int:
+    """`ldn-jax plot`: overlay runs' moving return vs episodes (mean, 95% band over seeds)."""
+    p = _Parser(prog="ldn-jax plot", description=plot.__doc__)
+    p.add_argument("run_dirs", type=Path, nargs="+", metavar="RUN_DIR")
+    p.add_argument("--out", type=Path, default=Path("comparison.png"), help="the PNG to write")
+    try:
+        args = p.parse_args(argv)
+        compare_runs(args.run_dirs, args.out)
+    except (UsageError, ValueError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    except OSError as error:
+        print(f"error: cannot write {args.out}: {error.strerror or error}", file=sys.stderr)
+        return 2
+    print(f"comparison: {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
