@@ -39,8 +39,12 @@ brax 0.14.2's sources):
   part of the range test cannot be seen in a real observation; we apply the range test to
   obs[1:], which agrees with brax except when a true velocity exceeds 100.
 - walker2d: 0.8 < torso z (obs[0]) < 2 and -1 < torso angle (obs[1]) < 1. Exact.
-- ant: 0.2 <= torso z <= 1 (brax reads the torso body's z; obs[0] is the free joint's z, the
-  same number). Exact.
+- ant: 0.2 <= torso z <= 1, where brax reads z from the body transforms and obs[0] is the free
+  joint's z. Under "generalized" the two are the same number. Under "mjx" the body transforms
+  are MuJoCo's `xpos`, computed before the last physics substep's integration, so brax's z lags
+  obs[0] by one substep (up to 0.05 in random rollouts): we undo MuJoCo's Euler step,
+  z = obs[0] - h * obs[15] (obs[15] is the free joint's z velocity, h = 0.01 s). Exact up
+  to float rounding; "positional" is treated like "generalized" (not verified).
 - inverted_pendulum: |pole angle| (obs[1]) > 0.2. Exact.
 - halfcheetah, reacher: never terminate.
 
@@ -109,32 +113,42 @@ class ContinuousActions:
     discrete: bool = False
 
 
-def _never(obs: Array) -> Array:
+def _never(obs: Array, params: EnvParams) -> Array:
+    del params
     return jnp.zeros(obs.shape[:-1], bool)
 
 
-def hopper_is_terminal(obs: Array) -> Array:
+def hopper_is_terminal(obs: Array, params: EnvParams) -> Array:
     """brax Hopper's unhealthy test on obs `[..., 11]` (see the module docstring)."""
+    del params
     z, angle = obs[..., 0], obs[..., 1]
     in_range = jnp.all((obs[..., 1:] > -100.0) & (obs[..., 1:] < 100.0), axis=-1)
     healthy = in_range & (z > 0.7) & (z < jnp.inf) & (angle > -0.2) & (angle < 0.2)
     return ~healthy
 
 
-def walker2d_is_terminal(obs: Array) -> Array:
+def walker2d_is_terminal(obs: Array, params: EnvParams) -> Array:
     """brax Walker2d's unhealthy test on obs `[..., 17]`."""
+    del params
     z, angle = obs[..., 0], obs[..., 1]
     return ~((z > 0.8) & (z < 2.0) & (angle > -1.0) & (angle < 1.0))
 
 
-def ant_is_terminal(obs: Array) -> Array:
+ANT_MJX_SUBSTEP = 0.01
+"""Physics timestep (s) of brax's Ant on the mjx backend (5 substeps per env step)."""
+
+
+def ant_is_terminal(obs: Array, params: EnvParams) -> Array:
     """brax Ant's unhealthy test on obs `[..., 27]`: torso z outside [0.2, 1]."""
     z = obs[..., 0]
+    if params.backend == "mjx":
+        z = z - ANT_MJX_SUBSTEP * obs[..., 15]  # brax's z: before the last substep
     return (z < 0.2) | (z > 1.0)
 
 
-def inverted_pendulum_is_terminal(obs: Array) -> Array:
+def inverted_pendulum_is_terminal(obs: Array, params: EnvParams) -> Array:
     """brax InvertedPendulum's done on obs `[..., 4]`: the pole leans more than 0.2 rad."""
+    del params
     return jnp.abs(obs[..., 1]) > 0.2
 
 
@@ -157,7 +171,7 @@ RewardFn = Callable[[Array, Array, Array], Array]
 class Task:
     obs_size: int
     action_size: int
-    is_terminal: Callable[[Array], Array]
+    is_terminal: Callable[[Array, EnvParams], Array]
     reward: RewardFn | None
     """Exact reward from `(obs, action, next_obs)`, or None where the obs does not fix it."""
 
@@ -181,7 +195,10 @@ def brax_env(task: str, backend: str) -> Any:
         raise ValueError(f"unknown backend {backend!r}; valid backends: {', '.join(BACKENDS)}")
     from brax import envs as brax_envs  # slow import: only when a MuJoCo task is used
 
-    return brax_envs.get_environment(task, backend=backend)
+    # The first call usually comes while jit traces reset or step; building the model then
+    # would store that trace's tracers in the cached env, and every later trace would fail.
+    with jax.ensure_compile_time_eval():
+        return brax_envs.get_environment(task, backend=backend)
 
 
 def _canonical(state: Any) -> Any:
@@ -211,7 +228,7 @@ class MujocoEnv:
         return brax_state.obs, new_state, brax_state.reward, terminated, truncated, {}
 
     def is_terminal(self, obs: Array, params: EnvParams) -> Array:
-        return TASKS[params.task].is_terminal(obs)
+        return TASKS[params.task].is_terminal(obs, params)
 
     def reward(self, obs: Array, action: Array, next_obs: Array, params: EnvParams) -> Array | None:
         """Reward `[...]` of transitions `obs [..., O]`, `action [..., A]`, `next_obs [..., O]`

@@ -104,35 +104,51 @@ def test_is_terminal_agrees_with_brax_done(task):
     np.testing.assert_array_equal(np.asarray(env.is_terminal(out["next_obs"], params)), terminated)
     assert not np.asarray(env.is_terminal(out["obs"][:, 0], params)).any()  # reset states
     if task in TERMINATES:
-        if task != "ant":  # random actions rarely end an ant's episode within 40 steps
-            assert 0.05 < terminated.mean() < 0.95
+        assert 0.05 < terminated.mean() < 0.95
     else:
         assert not terminated.any()
-    if task in ("hopper", "walker2d", "ant"):
+    if task in ("hopper", "walker2d"):
         # brax tests the torso body's height; obs[0] must be that same number.
         np.testing.assert_array_equal(out["next_obs"][..., 0], out["torso_z"])
+    if task == "ant":
+        # On mjx brax's torso z lags obs[0] by one Euler substep (see envs/mujoco.py).
+        obs = out["next_obs"]
+        assert np.abs(obs[..., 0] - out["torso_z"]).max() > 1e-3  # the lag is real
+        np.testing.assert_allclose(
+            obs[..., 0] - mujoco.ANT_MJX_SUBSTEP * obs[..., 15], out["torso_z"], atol=1e-6
+        )
+        assert float(mujoco.brax_env("ant", "mjx").sys.opt.timestep) == pytest.approx(
+            mujoco.ANT_MJX_SUBSTEP
+        )
 
 
 def test_is_terminal_boundaries():
     """The healthy ranges, open or closed as brax writes them, on hand-made observations."""
+    params = mujoco.EnvParams(backend="generalized")  # ant: no mjx substep correction
     hopper = np.zeros((4, 11), np.float32)
     hopper[:, 0] = [0.7, 0.71, 1.2, 1.2]
     hopper[:, 1] = [0.0, 0.0, 0.2, 0.19]
     hopper[3, 5] = 100.0  # a velocity entry outside (-100, 100)
-    np.testing.assert_array_equal(mujoco.hopper_is_terminal(hopper), [True, False, True, True])
+    np.testing.assert_array_equal(
+        mujoco.hopper_is_terminal(hopper, params), [True, False, True, True]
+    )
     walker = np.zeros((5, 17), np.float32)
     walker[:, 0] = [0.8, 0.81, 2.0, 1.99, 1.2]
     walker[:, 1] = [0.0, 0.0, 0.0, 0.0, -1.0]
     np.testing.assert_array_equal(
-        mujoco.walker2d_is_terminal(walker), [True, False, True, False, True]
+        mujoco.walker2d_is_terminal(walker, params), [True, False, True, False, True]
     )
     ant = np.zeros((4, 27), np.float32)
     ant[:, 0] = [0.2, 1.0, 0.19, 1.01]
-    np.testing.assert_array_equal(mujoco.ant_is_terminal(ant), [False, False, True, True])
+    np.testing.assert_array_equal(mujoco.ant_is_terminal(ant, params), [False, False, True, True])
+    rising = np.zeros((1, 27), np.float32)
+    rising[0, 0], rising[0, 15] = 0.21, 2.0  # z was 0.21 - 0.01 * 2 = 0.19 one substep ago
+    assert not mujoco.ant_is_terminal(rising, params)[0]
+    assert mujoco.ant_is_terminal(rising, params.replace(backend="mjx"))[0]
     pendulum = np.zeros((3, 4), np.float32)
     pendulum[:, 1] = [0.2, -0.21, 0.21]
     np.testing.assert_array_equal(
-        mujoco.inverted_pendulum_is_terminal(pendulum), [False, True, True]
+        mujoco.inverted_pendulum_is_terminal(pendulum, params), [False, True, True]
     )
 
 
@@ -181,6 +197,13 @@ def test_bad_task_or_backend_is_a_one_line_error():
         mujoco.brax_env("hopper", "warp")
     with pytest.raises(ValueError, match="unknown MuJoCo task 'humanoid'; valid tasks: ant"):
         mujoco.brax_env("humanoid", "mjx")
+
+
+def test_brax_env_built_inside_jit_holds_no_tracers():
+    mujoco.brax_env.cache_clear()
+    jax.jit(lambda x: (mujoco.brax_env("inverted_pendulum", "mjx"), x)[1])(0.0)
+    leaves = jax.tree.leaves(mujoco.brax_env("inverted_pendulum", "mjx").sys)
+    assert leaves and not any(isinstance(leaf, jax.core.Tracer) for leaf in leaves)
 
 
 def test_make_and_sizes_do_not_import_brax():
