@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from envs import mujoco
 from envs.cartpole import CartPole, EnvParams
 
 _CARTPOLE = {
@@ -18,9 +19,19 @@ def _cartpole(name: str) -> Callable[[], tuple[Any, Any]]:
     return lambda: (CartPole(), _CARTPOLE[name])
 
 
-_REGISTRY: dict[str, Callable[[], tuple[Any, Any]]] = {name: _cartpole(name) for name in _CARTPOLE}
+MUJOCO_NAMES = tuple(mujoco.TASKS)
 
-MUJOCO_NAMES = ("ant", "halfcheetah", "hopper", "reacher", "walker2d", "inverted_pendulum")
+
+def _mujoco(name: str) -> Callable[[], tuple[Any, Any]]:
+    # The paper's 1,000-step episodes through MJX; `params.replace(backend="generalized")`
+    # switches the physics pipeline.
+    return lambda: (mujoco.MujocoEnv(), mujoco.EnvParams(task=name, backend="mjx", max_steps=1000))
+
+
+_REGISTRY: dict[str, Callable[[], tuple[Any, Any]]] = {
+    **{name: _cartpole(name) for name in _CARTPOLE},
+    **{name: _mujoco(name) for name in MUJOCO_NAMES},
+}
 
 
 def names() -> tuple[str, ...]:
@@ -31,7 +42,5 @@ def names() -> tuple[str, ...]:
 def make(name: str) -> tuple[Any, Any]:
     """Return `(env, params)` for a registered name."""
     if name not in _REGISTRY:
-        if name in MUJOCO_NAMES:
-            raise ValueError(f"env {name!r} (MuJoCo through MJX) is not available yet")
         raise ValueError(f"unknown env {name!r}; valid names: {', '.join(names())}")
     return _REGISTRY[name]()
