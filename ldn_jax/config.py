@@ -208,6 +208,11 @@ def validate(config: Config) -> Config:
     """Raise ValueError with a one-line message for the first impossible value."""
     if config.env not in envs.names():
         envs.make(config.env)  # raises the registry's one-line error
+    env, params = envs.make(config.env)
+    if not env.action_spec(params).discrete:
+        raise ValueError(
+            f"env {config.env!r} has continuous actions, which the learners do not support yet"
+        )
     if config.algo not in ALGORITHMS:
         raise ValueError(f"unknown algo {config.algo!r}; valid algos: {', '.join(ALGORITHMS)}")
     checks = [
