@@ -15,12 +15,24 @@ Array = jax.Array
 
 
 @struct.dataclass
+class Normalizer:
+    """Observation and reward statistics the model works in (identity when off)."""
+
+    obs_mean: Array
+    obs_std: Array
+    reward_mean: Array
+    reward_std: Array
+
+
+@struct.dataclass
 class ModelState:
     params: dict
     """M1's parameters: fitted on real transitions."""
     frozen: dict
     """M0's parameters: M1's initial parameters, never updated."""
     opt_state: optax.OptState
+    stats: Normalizer
+    """Shared by M1 and M0; refreshed from the buffer before each fit when normalising."""
 
 
 class Dynamics:
@@ -43,25 +55,78 @@ class Dynamics:
         params = self.net.init(key, jnp.zeros((1, self.obs_size)), jnp.zeros((1, self.action_size)))
         # M0 is M1 at initialisation: the same values, kept apart and never trained.
         frozen = jax.tree.map(jnp.copy, params)
-        return ModelState(params=params, frozen=frozen, opt_state=self.optimizer.init(params))
+        stats = self.init_stats()
+        return ModelState(
+            params=params, frozen=frozen, opt_state=self.optimizer.init(params), stats=stats
+        )
 
-    def predict(self, params: dict, obs: Array, action: Array) -> tuple[Array, Array]:
+    def predict_normalized(
+        self, params: dict, stats: Normalizer, obs: Array, action: Array
+    ) -> tuple[Array, Array]:
+        """The net's own outputs: next obs and reward in normalised units."""
+        return self.net.apply(params, (obs - stats.obs_mean) / stats.obs_std, action)
+
+    @staticmethod
+    def denormalize(stats: Normalizer, next_obs: Array, reward: Array) -> tuple[Array, Array]:
+        return (
+            next_obs * stats.obs_std + stats.obs_mean,
+            reward * stats.reward_std + stats.reward_mean,
+        )
+
+    def predict(
+        self, params: dict, obs: Array, action: Array, stats: Normalizer | None = None
+    ) -> tuple[Array, Array]:
         """`[..., obs_size], [..., action_size] -> (next_obs [..., obs_size], reward [...])`."""
-        return self.net.apply(params, obs, action)
+        stats = stats if stats is not None else self.init_stats()
+        return self.denormalize(stats, *self.predict_normalized(params, stats, obs, action))
 
-    def loss(self, params: dict, batch: Transitions) -> Array:
-        """Eq. 2: MSE on the target y = [s', r], mean over batch and output dims."""
-        next_obs, reward = self.predict(params, batch.obs, batch.action)
+    def init_stats(self) -> Normalizer:
+        return Normalizer(
+            obs_mean=jnp.zeros(self.obs_size),
+            obs_std=jnp.ones(self.obs_size),
+            reward_mean=jnp.zeros(()),
+            reward_std=jnp.ones(()),
+        )
+
+    def loss(self, params: dict, batch: Transitions, stats: Normalizer | None = None) -> Array:
+        """Eq. 2: MSE on the target y = [s', r] (normalised when on), mean over batch and
+        output dims."""
+        stats = stats if stats is not None else self.init_stats()
+        next_obs, reward = self.predict_normalized(params, stats, batch.obs, batch.action)
         pred = jnp.concatenate([next_obs, reward[..., None]], axis=-1)
-        target = jnp.concatenate([batch.next_obs, batch.reward[..., None]], axis=-1)
+        target = jnp.concatenate(
+            [
+                (batch.next_obs - stats.obs_mean) / stats.obs_std,
+                ((batch.reward - stats.reward_mean) / stats.reward_std)[..., None],
+            ],
+            axis=-1,
+        )
         return jnp.mean(jnp.square(pred - target))
+
+    def buffer_stats(self, buffer: Buffer) -> Normalizer:
+        """Mean and std of the buffer's valid observations and rewards (std floored)."""
+        valid = (jnp.arange(buffer.capacity) < buffer.size).astype(jnp.float32)
+        count = jnp.maximum(valid.sum(), 1.0)
+
+        def moments(x: Array) -> tuple[Array, Array]:
+            w = valid.reshape((-1,) + (1,) * (x.ndim - 1))
+            mean = (x * w).sum(0) / count
+            var = (jnp.square(x - mean) * w).sum(0) / count
+            return mean, jnp.maximum(jnp.sqrt(var), 1e-3)
+
+        obs_mean, obs_std = moments(buffer.data.obs)
+        reward_mean, reward_std = moments(buffer.data.reward)
+        return Normalizer(obs_mean, obs_std, reward_mean, reward_std)
 
     def fit(self, state: ModelState, buffer: Buffer, key: Array) -> tuple[ModelState, Array]:
         """`config.updates` minibatch Adam steps on M1; returns the mean loss."""
 
+        if self.config.normalize:
+            state = state.replace(stats=self.buffer_stats(buffer))
+
         def update(state: ModelState, key: Array):
             batch = buffer_sample(buffer, key, self.config.batch_size)
-            loss, grads = jax.value_and_grad(self.loss)(state.params, batch)
+            loss, grads = jax.value_and_grad(self.loss)(state.params, batch, state.stats)
             updates, opt_state = self.optimizer.update(grads, state.opt_state, state.params)
             params = optax.apply_updates(state.params, updates)
             return state.replace(params=params, opt_state=opt_state), loss

@@ -23,19 +23,25 @@ def model_world(
     dynamics: Dynamics,
     model: ModelState,
     is_terminal: Any,
-    n_actions: int,
+    model_action: Any,
     k: Array,
     ld_stop: bool,
 ) -> WorldStep:
-    """A world that steps M1. Its extras carry each step's learning degree `ld`."""
+    """A world that steps M1. Its extras carry each step's learning degree `ld`.
+
+    `model_action` encodes the env action as the model takes it (one-hot, or the clipped
+    vector). The deviation of eq. 3 is taken in the model's normalised output space (the raw
+    one when normalisation is off), so no observation dimension dominates it by its units.
+    """
 
     def step(key: Array, world: None, obs: Array, action: Array):
-        onehot = jax.nn.one_hot(action, n_actions)
-        next_obs, reward = dynamics.predict(model.params, obs, onehot)
-        next_obs_m0, reward_m0 = dynamics.predict(model.frozen, obs, onehot)
+        encoded = model_action(action)
+        m1 = dynamics.predict_normalized(model.params, model.stats, obs, encoded)
+        m0 = dynamics.predict_normalized(model.frozen, model.stats, obs, encoded)
+        next_obs, reward = dynamics.denormalize(model.stats, *m1)
         sigma2 = deviation(
-            jnp.concatenate([next_obs, reward[..., None]], axis=-1),
-            jnp.concatenate([next_obs_m0, reward_m0[..., None]], axis=-1),
+            jnp.concatenate([m1[0], m1[1][..., None]], axis=-1),
+            jnp.concatenate([m0[0], m0[1][..., None]], axis=-1),
         )
         ld = learning_degree(sigma2, k)
         if ld_stop:

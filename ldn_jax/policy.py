@@ -21,7 +21,8 @@ def load_policy(
 ) -> Callable[[np.ndarray], int | np.ndarray]:
     """The greedy policy of one seed and K of a finished run.
 
-    Returns `act(obs)`: a numpy observation in, a Python int (discrete actions) out.
+    Returns `act(obs)`: a numpy observation in; out a Python int (discrete actions) or a
+    float32 numpy array within the action bounds (continuous: the Gaussian's mean).
     `k=None` picks the run's only K, or its first one.
     """
     run_dir = Path(run_dir)
@@ -35,8 +36,15 @@ def load_policy(
     params = jax.tree.map(lambda x: x[k_index, seed], state.learner.params)
     greedy = jax.jit(trainer.learner.greedy)
 
-    def act(obs: np.ndarray) -> int:
-        return int(greedy(params, np.asarray(obs, np.float32)))
+    if trainer.learner.policy.discrete:
+
+        def act(obs: np.ndarray) -> int:
+            return int(greedy(params, np.asarray(obs, np.float32)))
+
+    else:
+
+        def act(obs: np.ndarray) -> np.ndarray:
+            return np.asarray(greedy(params, np.asarray(obs, np.float32)), np.float32)
 
     return act
 

@@ -20,8 +20,9 @@ from ldn_jax.learners.base import LearnerState, Segment
 Array = jax.Array
 
 WorldStep = Callable[[Array, Any, Array, Array], tuple[Array, Any, Array, Array, Array, dict]]
-"""`(key, world_state, obs [W, d], action [W]) -> (next_obs, world_state, reward [W],
-terminated [W], truncated [W], extras {name: [W]})`."""
+"""`(key, world_state, obs [W, d], action [W] or [W, a]) -> (next_obs, world_state,
+reward [W], terminated [W], truncated [W], extras {name: [W]})`. The action is the one the
+env executes (continuous actions clipped to the bounds); segments keep the policy's sample."""
 
 
 @struct.dataclass
@@ -77,7 +78,7 @@ def play_episodes(
         k_act, k_world = jax.random.split(key)
         action = learner.act(carry.learner.params, k_act, carry.obs)
         next_obs, world, reward, terminated, truncated, extras = world_step(
-            k_world, carry.world, carry.obs, action
+            k_world, carry.world, carry.obs, learner.env_action(action)
         )
         truncated = (truncated | (carry.time + 1 >= max_steps)) & ~terminated
         done = terminated | truncated

@@ -77,12 +77,13 @@ class Trainer:
         self.config = config
         self.env, self.env_params = envs.make(config.env)
         self.obs_size = self.env.observation_size(self.env_params)
-        self.n_actions = self.env.action_spec(self.env_params).size
+        self.action_spec = self.env.action_spec(self.env_params)
         self.max_steps = self.env_params.max_steps
         learner = LEARNERS[config.algorithm.learner]
-        self.learner = learner(config.agent, self.obs_size, self.n_actions)
+        self.learner = learner(config.agent, self.obs_size, self.action_spec)
+        self.model_action_size = self.learner.policy.model_action_size
         self.dynamics = (
-            Dynamics(config.model, self.obs_size, self.n_actions)
+            Dynamics(config.model, self.obs_size, self.model_action_size)
             if config.algorithm.uses_model
             else None
         )
@@ -94,7 +95,9 @@ class Trainer:
         model = buffer = None
         if self.dynamics is not None:
             model = self.dynamics.init(k_model)
-            buffer = buffer_init(self.config.model.buffer_capacity, self.obs_size, self.n_actions)
+            buffer = buffer_init(
+                self.config.model.buffer_capacity, self.obs_size, self.model_action_size
+            )
         zero = jnp.zeros((), jnp.int32)
         return TrainState(
             learner=self.learner.init(k_learner),
@@ -139,7 +142,7 @@ class Trainer:
         flat = lambda x: x.reshape((-1, *x.shape[2:]))
         batch = Transitions(
             obs=flat(steps.obs),
-            action=flat(jax.nn.one_hot(steps.action, self.n_actions)),
+            action=flat(self.learner.policy.model_action(steps.action)),
             next_obs=flat(steps.next_obs),
             reward=flat(steps.reward),
         )
@@ -154,7 +157,7 @@ class Trainer:
             self.dynamics,
             state.model,
             lambda o: self.env.is_terminal(o, self.env_params),
-            self.n_actions,
+            self.learner.policy.model_action,
             k,
             self.config.algorithm.ld_stop,
         )

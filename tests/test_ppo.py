@@ -114,7 +114,7 @@ def _assert_trees_equal(a, b):
 @pytest.mark.parametrize("learner_cls", [A2C, PPO])
 def test_masked_steps_change_nothing_bitwise(learner_cls):
     agent = PPO_AGENT if learner_cls is PPO else AgentConfig()
-    learner = learner_cls(agent, obs_size=4, n_actions=2)
+    learner = learner_cls(agent, obs_size=4, action_spec=2)
     state = learner.init(jax.random.key(0))
     # Imagined-looking segment: workers stopped after 1, 3, 7 and all 12 steps.
     segment = _segment(jax.random.key(1), 12, 4, dead_from=[1, 3, 7, 12])
@@ -131,7 +131,7 @@ def test_masked_steps_change_nothing_bitwise(learner_cls):
 
 
 def test_ppo_fully_masked_segment_leaves_state_bitwise_unchanged():
-    learner = PPO(PPO_AGENT, obs_size=4, n_actions=2)
+    learner = PPO(PPO_AGENT, obs_size=4, action_spec=2)
     state = learner.init(jax.random.key(0))
     segment = _segment(jax.random.key(1), 10, 3)
     dead = segment.replace(weight=jnp.zeros_like(segment.weight))
@@ -141,7 +141,7 @@ def test_ppo_fully_masked_segment_leaves_state_bitwise_unchanged():
 
 def test_ppo_any_row_count_pads_to_whole_minibatches():
     agent = from_preset("paper", algo="ppo", agent={"minibatches": 4, "epochs": 2}).agent
-    learner = PPO(agent, obs_size=3, n_actions=2)
+    learner = PPO(agent, obs_size=3, action_spec=2)
     state = learner.init(jax.random.key(0))
     segment = _segment(jax.random.key(1), 7, 3, obs_size=3)  # 21 rows, 4 minibatches
     new, info = jax.jit(learner.update)(state, segment, jax.random.key(2))
@@ -153,7 +153,7 @@ def test_ppo_any_row_count_pads_to_whole_minibatches():
 
 def test_ppo_update_raises_probability_of_the_better_action():
     # A bandit: action 0 pays 1, action 1 pays 0; one-step episodes, no bootstrap.
-    learner = PPO(PPO_AGENT, obs_size=2, n_actions=2)
+    learner = PPO(PPO_AGENT, obs_size=2, action_spec=2)
     state = learner.init(jax.random.key(0))
     n, workers = 16, 8
     action = jnp.tile(jnp.arange(workers) % 2, (n, 1))

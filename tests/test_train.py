@@ -26,7 +26,7 @@ def _scripted_world(end_at, terminal):
 
 
 def test_masks_end_episodes_and_stop_learning():
-    learner = A2C(AgentConfig(n_steps=4), obs_size=2, n_actions=2)
+    learner = A2C(AgentConfig(n_steps=4), obs_size=2, action_spec=2)
     state = learner.init(jax.random.key(0))
     world = _scripted_world([3, 6, 1], [True, False, False])
     obs = jnp.zeros((3, 2))
@@ -46,7 +46,7 @@ def test_masks_end_episodes_and_stop_learning():
 
 
 def test_max_steps_truncates():
-    learner = A2C(AgentConfig(n_steps=3), obs_size=2, n_actions=2)
+    learner = A2C(AgentConfig(n_steps=3), obs_size=2, action_spec=2)
     world = _scripted_world([100, 100], [True, True])
     _, episodes = play_episodes(
         jax.random.key(1),
@@ -63,7 +63,7 @@ def test_max_steps_truncates():
 
 
 def test_fully_masked_segment_leaves_learner_bitwise_unchanged():
-    learner = A2C(AgentConfig(), obs_size=4, n_actions=2)
+    learner = A2C(AgentConfig(), obs_size=4, action_spec=2)
     state = learner.init(jax.random.key(0))
     world = _scripted_world([1, 1], [True, True])
     # One live step, then nothing: the update of the segment holding it is the only change.
@@ -90,9 +90,10 @@ def _imagine(ld_stop, trained):
     model = dynamics.init(jax.random.key(0))
     if trained:  # move M1 far from M0: LD near 1
         model = model.replace(params=jax.tree.map(lambda p: p + 3.0, model.params))
-    learner = A2C(AgentConfig(), obs_size=4, n_actions=2)
+    learner = A2C(AgentConfig(), obs_size=4, action_spec=2)
     never_terminal = lambda obs: jnp.zeros(obs.shape[:-1], bool)
-    world = model_world(dynamics, model, never_terminal, 2, jnp.float32(1.0), ld_stop)
+    encode = lambda a: jax.nn.one_hot(a, 2)
+    world = model_world(dynamics, model, never_terminal, encode, jnp.float32(1.0), ld_stop)
     obs = jax.random.uniform(jax.random.key(2), (64, 4), minval=-0.05, maxval=0.05)
     _, episodes = jax.jit(play_episodes, static_argnums=(2, 3, 6))(
         jax.random.key(3), learner.init(jax.random.key(4)), learner, world, obs, None, 50

@@ -48,8 +48,8 @@ def n_step_targets(
 class A2C(ActorCritic):
     """One RMSProp step per segment on the n-step actor-critic loss."""
 
-    def __init__(self, config: AgentConfig, obs_size: int, n_actions: int):
-        super().__init__(config, obs_size, n_actions)
+    def __init__(self, config: AgentConfig, obs_size: int, action_spec):
+        super().__init__(config, obs_size, action_spec)
         # Hyperparameters injected into the optimiser state are arrays, so a learning rate
         # can differ between vmapped runs.
         rmsprop = lambda lr: optax.inject_hyperparams(optax.rmsprop)(

@@ -92,16 +92,95 @@ def keep_if_any(new, old, weight: Array):
     return jax.tree.map(lambda n, o: jnp.where(any_live, n, o), new, old)
 
 
-def categorical_log_prob_entropy(logits: Array, action: Array) -> tuple[Array, Array]:
-    """`log pi(action)` and the entropy of the softmax policy, `[..., A], [...] -> [...], [...]`."""
-    log_probs = jax.nn.log_softmax(logits)
-    log_prob = jnp.take_along_axis(log_probs, action[..., None], axis=-1)[..., 0]
-    entropy = -jnp.sum(jnp.exp(log_probs) * log_probs, axis=-1)
-    return log_prob, entropy
+class Categorical:
+    """Softmax policy over `n` actions; actions are int32 indices `[...]`."""
+
+    discrete = True
+
+    def __init__(self, n: int):
+        self.n = n
+        self.out_size = n
+        self.model_action_size = n
+
+    def sample(self, key: Array, out: Array) -> Array:
+        return jax.random.categorical(key, out)
+
+    def mode(self, out: Array) -> Array:
+        return jnp.argmax(out, axis=-1)
+
+    def log_prob_entropy(self, out: Array, action: Array) -> tuple[Array, Array]:
+        """`log pi(action)` and the policy's entropy, `[..., n], [...] -> [...], [...]`."""
+        log_probs = jax.nn.log_softmax(out)
+        log_prob = jnp.take_along_axis(log_probs, action[..., None], axis=-1)[..., 0]
+        entropy = -jnp.sum(jnp.exp(log_probs) * log_probs, axis=-1)
+        return log_prob, entropy
+
+    def env_action(self, action: Array) -> Array:
+        return action
+
+    def model_action(self, action: Array) -> Array:
+        """What the dynamics model takes: one-hot."""
+        return jax.nn.one_hot(action, self.n)
+
+
+class Gaussian:
+    """Diagonal Gaussian policy with the tutorial code's parametrisation: mean =
+    tanh(.) * bound (centred in the bounds), std = softplus(.) + `min_std`.
+
+    Actions are the raw samples `[..., d]`; the env and the model get them clipped to the
+    bounds, and the log-probability is that of the raw sample (so PPO's ratio is exact).
+    """
+
+    discrete = False
+
+    def __init__(self, low: tuple[float, ...], high: tuple[float, ...], min_std: float):
+        self.low = jnp.asarray(low, jnp.float32)
+        self.high = jnp.asarray(high, jnp.float32)
+        self.min_std = min_std
+        self.size = len(low)
+        self.out_size = 2 * self.size
+        self.model_action_size = self.size
+
+    def mean_std(self, out: Array) -> tuple[Array, Array]:
+        centre, bound = (self.high + self.low) / 2, (self.high - self.low) / 2
+        mean = centre + jnp.tanh(out[..., : self.size]) * bound
+        std = jax.nn.softplus(out[..., self.size :]) + self.min_std
+        return mean, std
+
+    def sample(self, key: Array, out: Array) -> Array:
+        mean, std = self.mean_std(out)
+        return mean + std * jax.random.normal(key, mean.shape)
+
+    def mode(self, out: Array) -> Array:
+        return self.mean_std(out)[0]
+
+    def log_prob_entropy(self, out: Array, action: Array) -> tuple[Array, Array]:
+        """`log pi(action)` and the entropy, summed over action dims: `[..., 2d], [..., d]`."""
+        mean, std = self.mean_std(out)
+        z = (action - mean) / std
+        log_prob = jnp.sum(-0.5 * jnp.square(z) - jnp.log(std) - 0.5 * jnp.log(2 * jnp.pi), -1)
+        entropy = jnp.sum(0.5 + 0.5 * jnp.log(2 * jnp.pi) + jnp.log(std), axis=-1)
+        return log_prob, entropy
+
+    def env_action(self, action: Array) -> Array:
+        return jnp.clip(action, self.low, self.high)
+
+    def model_action(self, action: Array) -> Array:
+        return self.env_action(action)
+
+
+def make_policy(action_spec, min_std: float = 1e-4) -> Categorical | Gaussian:
+    """The policy head for an env's `action_spec` (or a plain count of discrete actions)."""
+    if isinstance(action_spec, int):
+        return Categorical(action_spec)
+    if action_spec.discrete:
+        return Categorical(action_spec.size)
+    return Gaussian(tuple(action_spec.low), tuple(action_spec.high), min_std)
 
 
 class ActorCritic:
-    """The paper's actor (softmax policy) and critic; a learner adds its loss and update.
+    """The paper's actor (softmax or Gaussian policy) and critic; a learner adds its loss and
+    update.
 
     Subclasses set `self.optimizer` and implement
     `update(state, segment, key) -> (state, losses)`.
@@ -109,12 +188,13 @@ class ActorCritic:
 
     optimizer: object
 
-    def __init__(self, config: AgentConfig, obs_size: int, n_actions: int):
+    def __init__(self, config: AgentConfig, obs_size: int, action_spec):
+        """`action_spec`: an env's `ActionSpec`, or the number of discrete actions."""
         self.config = config
         self.obs_size = obs_size
-        self.n_actions = n_actions
+        self.policy = make_policy(action_spec, config.min_std)
         mlp = lambda hidden, out: MLP(hidden, out, config.activation, config.init_std)
-        self.actor = mlp(config.actor_hidden, n_actions)
+        self.actor = mlp(config.actor_hidden, self.policy.out_size)
         self.critic = mlp(config.critic_hidden, 1)
 
     def init(self, key: Array) -> LearnerState:
@@ -127,17 +207,22 @@ class ActorCritic:
         return LearnerState(params=params, opt_state=self.optimizer.init(params))
 
     def logits(self, params: dict, obs: Array) -> Array:
+        """The actor's raw output: logits (discrete) or mean and std pre-activations."""
         return self.actor.apply(params["actor"], obs)
 
     def value(self, params: dict, obs: Array) -> Array:
         return self.critic.apply(params["critic"], obs)[..., 0]
 
     def act(self, params: dict, key: Array, obs: Array) -> Array:
-        """Sample from the softmax policy, `[W, obs] -> [W]`."""
-        return jax.random.categorical(key, self.logits(params, obs))
+        """Sample from the policy, `[W, obs] -> [W]` (discrete) or `[W, d]` (continuous)."""
+        return self.policy.sample(key, self.logits(params, obs))
 
     def greedy(self, params: dict, obs: Array) -> Array:
-        return jnp.argmax(self.logits(params, obs), axis=-1)
+        """The deterministic action: argmax or the mean, as the env takes it."""
+        return self.policy.env_action(self.policy.mode(self.logits(params, obs)))
+
+    def env_action(self, action: Array) -> Array:
+        return self.policy.env_action(action)
 
     def log_prob_entropy(self, params: dict, obs: Array, action: Array) -> tuple[Array, Array]:
-        return categorical_log_prob_entropy(self.logits(params, obs), action)
+        return self.policy.log_prob_entropy(self.logits(params, obs), action)

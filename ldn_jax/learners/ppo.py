@@ -81,8 +81,8 @@ class Batch:
 class PPO(ActorCritic):
     """Clipped-objective PPO (PPO2) on each segment; Adam with global-norm clipping."""
 
-    def __init__(self, config: AgentConfig, obs_size: int, n_actions: int):
-        super().__init__(config, obs_size, n_actions)
+    def __init__(self, config: AgentConfig, obs_size: int, action_spec):
+        super().__init__(config, obs_size, action_spec)
         self.optimizer = optax.chain(
             optax.clip_by_global_norm(config.max_grad_norm),
             optax.multi_transform(

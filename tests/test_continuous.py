@@ -1,0 +1,117 @@
+"""Continuous actions: the Gaussian policy head, clipping, and both learners on a toy task."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from ldn_jax.config import AgentConfig, from_preset
+from ldn_jax.learners import A2C, PPO
+from ldn_jax.learners.base import Gaussian, Segment
+
+
+class Box:
+    discrete = False
+
+    def __init__(self, low, high):
+        self.low, self.high, self.size = low, high, len(low)
+
+
+def test_gaussian_mean_in_bounds_and_std_floor():
+    policy = Gaussian((-3.0, 0.0), (3.0, 2.0), min_std=1e-4)
+    out = jnp.array([[1e6, -1e6, -1e6, -1e6], [0.0, 0.0, 0.0, 0.0]])
+    mean, std = policy.mean_std(out)
+    np.testing.assert_allclose(np.asarray(mean), [[3.0, 0.0], [0.0, 1.0]])
+    np.testing.assert_allclose(np.asarray(std[0]), [1e-4, 1e-4])
+    np.testing.assert_allclose(np.asarray(std[1]), np.log(2.0) + 1e-4, rtol=1e-6)
+
+
+def test_gaussian_log_prob_and_entropy_hand_computed():
+    policy = Gaussian((-1.0, -1.0), (1.0, 1.0), min_std=0.0)
+    out = jnp.array([np.arctanh(0.5), 0.0, np.log(np.e - 1.0), np.log(np.e**2 - 1.0)])
+    action = jnp.array([1.0, -1.0])  # mean (0.5, 0), std (1, 2)
+    log_prob, entropy = policy.log_prob_entropy(out, action)
+    z1, z2 = (1.0 - 0.5) / 1.0, (-1.0 - 0.0) / 2.0
+    expected = -0.5 * (z1**2 + z2**2) - np.log(1.0) - np.log(2.0) - np.log(2 * np.pi)
+    np.testing.assert_allclose(float(log_prob), expected, rtol=1e-5)
+    np.testing.assert_allclose(
+        float(entropy), 1.0 + np.log(2 * np.pi) + np.log(1.0) + np.log(2.0), rtol=1e-5
+    )
+
+
+def test_samples_follow_the_policy_and_env_actions_are_clipped():
+    policy = Gaussian((-1.0,), (1.0,), min_std=1e-4)
+    out = jnp.tile(jnp.array([np.arctanh(0.2), np.log(np.exp(0.5) - 1.0)]), (50_000, 1))
+    samples = np.asarray(policy.sample(jax.random.key(0), out))[:, 0]
+    assert abs(samples.mean() - 0.2) < 0.01 and abs(samples.std() - 0.5) < 0.01
+    clipped = np.asarray(policy.env_action(jnp.asarray(samples)[:, None]))
+    assert clipped.min() >= -1.0 and clipped.max() <= 1.0 and (samples > 1.0).any()
+
+
+def _bandit_segment(key, n=32, workers=8):
+    """One-step episodes; the reward peaks at action 0.5."""
+    action = jax.random.uniform(key, (n, workers, 1), minval=-1.0, maxval=1.0)
+    return Segment(
+        obs=jnp.ones((n, workers, 2)),
+        action=action,
+        reward=-jnp.square(action[..., 0] - 0.5),
+        next_obs=jnp.ones((n, workers, 2)),
+        terminated=jnp.ones((n, workers), bool),
+        done=jnp.ones((n, workers), bool),
+        weight=jnp.ones((n, workers)),
+    )
+
+
+@pytest.mark.parametrize("learner_cls", [A2C, PPO])
+def test_learners_move_the_gaussian_mean_toward_the_better_action(learner_cls):
+    algo = "ppo" if learner_cls is PPO else "a2c"
+    agent = from_preset("paper", algo=algo, agent={"actor_lr": 1e-3}).agent
+    learner = learner_cls(agent, obs_size=2, action_spec=Box((-1.0,), (1.0,)))
+    state = learner.init(jax.random.key(0))
+    mean = lambda params: float(learner.greedy(params, jnp.ones((1, 2)))[0, 0])
+    start = mean(state.params)
+    update = jax.jit(learner.update)
+    for i in range(30):
+        state, info = update(state, _bandit_segment(jax.random.key(i)), jax.random.key(100 + i))
+    assert all(np.isfinite(float(v)) for v in info.values())
+    assert abs(mean(state.params) - 0.5) < abs(start - 0.5) - 0.1
+
+
+def test_masked_continuous_steps_change_nothing_bitwise():
+    learner = PPO(AgentConfig(), obs_size=2, action_spec=Box((-1.0,), (1.0,)))
+    state = learner.init(jax.random.key(0))
+    segment = _bandit_segment(jax.random.key(1), n=6, workers=3)
+    segment = segment.replace(weight=segment.weight.at[3:, 1].set(0.0))
+    dead = segment.weight == 0
+    garbage = segment.replace(
+        action=jnp.where(dead[..., None], jnp.nan, segment.action),
+        reward=jnp.where(dead, jnp.inf, segment.reward),
+    )
+    clean, _ = jax.jit(learner.update)(state, segment, jax.random.key(2))
+    dirty, _ = jax.jit(learner.update)(state, garbage, jax.random.key(2))
+    for a, b in zip(jax.tree.leaves(clean), jax.tree.leaves(dirty), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
+def test_continuous_defaults_normalise_the_model():
+    config = from_preset("paper", env="inverted_pendulum", algo="ldn")
+    assert config.model.normalize and config.model.predict_delta
+    assert config.agent.entropy_beta == 0.01 and config.agent.actor_lr == 1e-4
+    cartpole = from_preset("paper", env="cartpole-v1", algo="ldn")
+    assert not cartpole.model.normalize and cartpole.agent.actor_lr == 1e-3
+
+
+@pytest.mark.mujoco
+def test_ldn_trains_on_inverted_pendulum_end_to_end(tmp_path):
+    from experiments.run import train
+    from ldn_jax import load_policy
+
+    config = from_preset(
+        "paper", env="inverted_pendulum", algo="ldn", seeds=1, episodes=4, workers=2
+    )
+    summary = train(config, tmp_path, 0, quiet=True)
+    run = summary["runs"][0]
+    assert run["diverged"] is None and np.isfinite(run["final_moving_return"])
+    assert summary["imagined_steps"] > 0
+    action = load_policy(tmp_path)(np.zeros(4, np.float32))
+    assert action.shape == (1,) and action.dtype == np.float32 and -3.0 <= action[0] <= 3.0
