@@ -14,7 +14,7 @@ from pathlib import Path
 import gymnasium
 import numpy as np
 from gymnasium.envs.classic_control.cartpole import CartPoleEnv
-from gymnasium.wrappers import RecordVideo, TimeLimit
+from gymnasium.wrappers import RecordVideo, RescaleAction, TimeLimit
 
 import envs
 
@@ -69,7 +69,12 @@ def make_env(env: str, render_mode: str | None = None) -> gymnasium.Env:
         base = ForceTable(CartPoleEnv(render_mode=render_mode), params.forces)
         return TimeLimit(base, max_episode_steps=params.max_steps)
     if env in GYMNASIUM_IDS:
-        return gymnasium.make(GYMNASIUM_IDS[env], render_mode=render_mode)
+        made = gymnasium.make(GYMNASIUM_IDS[env], render_mode=render_mode)
+        ours, params = envs.make(env)
+        spec = ours.action_spec(params)
+        if not spec.discrete:  # our bounds (brax: [-1, 1]) onto gymnasium's (e.g. [-3, 3])
+            made = RescaleAction(made, np.asarray(spec.low), np.asarray(spec.high))
+        return made
     valid = ", ".join(sorted({*GYMNASIUM_IDS, *CUSTOM_CARTPOLES}))
     raise ValueError(f"env {env!r} has no gymnasium counterpart; those with one: {valid}")
 

@@ -27,7 +27,15 @@ import envs
 from experiments.loggers import LOGGERS, Logger, NullLogger, make_logger
 from experiments.plots import learning_curves
 from ldn_jax import checkpoint
-from ldn_jax.config import ALGORITHMS, PRESETS, Config, from_preset, validate
+from ldn_jax.config import (
+    ALGORITHMS,
+    BACKENDS,
+    DEFAULT_EPISODES,
+    PRESETS,
+    Config,
+    from_preset,
+    validate,
+)
 from ldn_jax.metrics import threshold_crossing
 from ldn_jax.policy import FINAL_CHECKPOINT
 from ldn_jax.train import Trainer, failure_names
@@ -60,7 +68,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--algo", help=f"one of: {', '.join(ALGORITHMS)} (default ldn)")
     p.add_argument("--seeds", type=int, help="number of vmapped seeds 0..N-1 (default 5)")
     p.add_argument("--k", help="comma-separated learning-degree gains K (default 0.5,1,2)")
-    p.add_argument("--episodes", type=int, help="real episodes per seed and K (default 1600)")
+    p.add_argument(
+        "--episodes",
+        type=int,
+        help="real episodes per seed and K (default 1600; inverted_pendulum 800, other MuJoCo "
+        "tasks 16: CPU budgets, raise them on a GPU)",
+    )
+    p.add_argument("--backend", help=f"MuJoCo physics: one of {', '.join(BACKENDS)} (default mjx)")
     p.add_argument("--workers", type=int, help="synchronous workers (default 8)")
     p.add_argument("--preset", help=f"one of: {', '.join(PRESETS)} (default paper)")
     p.add_argument("--threshold", type=float, help="moving-return threshold")
@@ -88,6 +102,7 @@ CONFIG_FLAGS = {
     "preset": "preset",
     "threshold": "threshold",
     "chunk": "chunk_iterations",
+    "backend": "backend",
 }
 """CLI flag -> the config field it sets."""
 
@@ -96,10 +111,14 @@ def build_config(args: argparse.Namespace) -> Config:
     given = lambda name: getattr(args, name) if getattr(args, name) is not None else DEFAULTS[name]
     algo = given("algo")
     overrides = {"env": given("env"), "algo": algo, "seeds": given("seeds")}
-    overrides["episodes"] = given("episodes")
+    overrides["episodes"] = (
+        args.episodes
+        if args.episodes is not None
+        else DEFAULT_EPISODES.get(overrides["env"], DEFAULTS["episodes"])
+    )
     k = _parse_k(given("k"))
     overrides["k"] = k if ALGORITHMS.get(algo, ALGORITHMS["ldn"]).ld_stop else k[:1] or k
-    for flag in ("workers", "threshold", "chunk"):
+    for flag in ("workers", "threshold", "chunk", "backend"):
         if getattr(args, flag) is not None:
             overrides[CONFIG_FLAGS[flag]] = getattr(args, flag)
     try:

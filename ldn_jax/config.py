@@ -97,6 +97,9 @@ class ModelConfig:
     """Hidden activation; the paper's nets have none ("linear")."""
     predict_delta: bool = False
     """Predict s' - s instead of s'."""
+    env_reward: bool = False
+    """Imagined rewards from the env's exact reward function where it has one (MuJoCo:
+    inverted_pendulum, reacher); the learned reward net otherwise and always when False."""
     normalize: bool = False
     """Work in standardised units (observation and reward mean/std of the real buffer,
     refreshed before each fit): for MuJoCo's 11- to 27-dimensional observations."""
@@ -130,6 +133,9 @@ class Config:
     """Real episodes per seed and K, summed over workers."""
     workers: int = 8
     """Synchronous workers (vmapped); one real and one imagined episode each per iteration."""
+    backend: str = "mjx"
+    """MuJoCo tasks: brax physics pipeline, "mjx" (the paper's MuJoCo, via MJX), or brax's
+    "generalized" / "positional" (faster on CPU; brax adapts some models). CartPole ignores it."""
     threshold: float | None = None
     """Moving-return threshold for "episodes to threshold"; None: the env's paper value."""
     moving_decay: float = 0.99
@@ -195,7 +201,15 @@ CONTINUOUS_DEFAULTS: dict[str, dict] = {
 The model then works in standardised units and predicts state deltas, which the paper's
 linear nets need for 11- to 27-dimensional observations (our reading; the paper is silent)."""
 
-CONTINUOUS_MODEL = {"normalize": True, "predict_delta": True}
+CONTINUOUS_MODEL = {"normalize": True, "predict_delta": True, "env_reward": True}
+
+BACKENDS = ("mjx", "generalized", "positional")
+
+DEFAULT_EPISODES = {"inverted_pendulum": 800}
+"""Budgets a CPU finishes in minutes, for envs whose paper-scale budget takes hours on CPU
+(1,000-step episodes of MJX physics): the `episodes` default where it is not `Config`'s."""
+for _task in ("ant", "halfcheetah", "hopper", "reacher", "walker2d"):
+    DEFAULT_EPISODES[_task] = 16
 
 PRESETS: dict[str, dict] = {
     "paper": {},
@@ -245,6 +259,7 @@ def validate(config: Config) -> Config:
         (len(set(config.k)) == len(config.k), f"K values must be distinct: {config.k}"),
         (config.episodes >= 1, f"episodes must be >= 1, got {config.episodes}"),
         (config.workers >= 1, f"workers must be >= 1, got {config.workers}"),
+        (config.backend in BACKENDS, f"backend must be one of {', '.join(BACKENDS)}"),
         (0 < config.moving_decay < 1, "moving_decay must be in (0, 1)"),
         (config.eval_episodes >= 1, "eval_episodes must be >= 1"),
         (config.chunk_iterations >= 1, "chunk_iterations must be >= 1"),

@@ -24,14 +24,17 @@ def model_world(
     model: ModelState,
     is_terminal: Any,
     model_action: Any,
+    env_reward: Any,
     k: Array,
     ld_stop: bool,
 ) -> WorldStep:
     """A world that steps M1. Its extras carry each step's learning degree `ld`.
 
-    `model_action` encodes the env action as the model takes it (one-hot, or the clipped
-    vector). The deviation of eq. 3 is taken in the model's normalised output space (the raw
-    one when normalisation is off), so no observation dimension dominates it by its units.
+    `env_reward(obs, action, next_obs)`, if not None, replaces the model's reward (the LD
+    still compares both models' whole output). `model_action` encodes the env action as the
+    model takes it (one-hot, or the clipped vector). The deviation of eq. 3 is taken in the
+    model's normalised output space (the raw one when normalisation is off), so no
+    observation dimension dominates it by its units.
     """
 
     def step(key: Array, world: None, obs: Array, action: Array):
@@ -39,6 +42,8 @@ def model_world(
         m1 = dynamics.predict_normalized(model.params, model.stats, obs, encoded)
         m0 = dynamics.predict_normalized(model.frozen, model.stats, obs, encoded)
         next_obs, reward = dynamics.denormalize(model.stats, *m1)
+        if env_reward is not None:
+            reward = env_reward(obs, action, next_obs)
         sigma2 = deviation(
             jnp.concatenate([m1[0], m1[1][..., None]], axis=-1),
             jnp.concatenate([m0[0], m0[1][..., None]], axis=-1),

@@ -76,6 +76,8 @@ class Trainer:
     def __init__(self, config: Config):
         self.config = config
         self.env, self.env_params = envs.make(config.env)
+        if hasattr(self.env_params, "backend"):
+            self.env_params = self.env_params.replace(backend=config.backend)
         self.obs_size = self.env.observation_size(self.env_params)
         self.action_spec = self.env.action_spec(self.env_params)
         self.max_steps = self.env_params.max_steps
@@ -158,6 +160,7 @@ class Trainer:
             state.model,
             lambda o: self.env.is_terminal(o, self.env_params),
             self.learner.policy.model_action,
+            self._env_reward(),
             k,
             self.config.algorithm.ld_stop,
         )
@@ -165,6 +168,18 @@ class Trainer:
             k_play, state.learner, self.learner, world, obs, None, self.max_steps
         )
         return state.replace(learner=learner), episodes
+
+    def _env_reward(self):
+        """The env's exact reward `(obs, action, next_obs) -> [...]`, if used and known."""
+        reward = getattr(self.env, "reward", None)
+        if not self.config.model.env_reward or reward is None:
+            return None
+        obs = jax.ShapeDtypeStruct((1, self.obs_size), jnp.float32)
+        action = jax.ShapeDtypeStruct((1, self.model_action_size), jnp.float32)
+        known = lambda o, a: reward(o, a, o, self.env_params)
+        if jax.eval_shape(known, obs, action) is None:  # this task's reward is not exact
+            return None
+        return lambda obs, action, next_obs: reward(obs, action, next_obs, self.env_params)
 
     # -- one iteration and a chunk of them -------------------------------------------------
 

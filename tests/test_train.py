@@ -93,7 +93,7 @@ def _imagine(ld_stop, trained):
     learner = A2C(AgentConfig(), obs_size=4, action_spec=2)
     never_terminal = lambda obs: jnp.zeros(obs.shape[:-1], bool)
     encode = lambda a: jax.nn.one_hot(a, 2)
-    world = model_world(dynamics, model, never_terminal, encode, jnp.float32(1.0), ld_stop)
+    world = model_world(dynamics, model, never_terminal, encode, None, jnp.float32(1.0), ld_stop)
     obs = jax.random.uniform(jax.random.key(2), (64, 4), minval=-0.05, maxval=0.05)
     _, episodes = jax.jit(play_episodes, static_argnums=(2, 3, 6))(
         jax.random.key(3), learner.init(jax.random.key(4)), learner, world, obs, None, 50
