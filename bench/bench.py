@@ -12,6 +12,7 @@ import json
 import os
 import platform
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -127,7 +128,9 @@ def training(
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument(
-        "--sections", default="env,train,rejax", help="comma list: env, train, rejax"
+        "--sections",
+        default="env,train,rejax,mujoco",
+        help="comma list: env, train, rejax, mujoco",
     )
     parser.add_argument(
         "--anchor-python",
@@ -154,9 +157,37 @@ def main() -> None:
             training(algo) for algo in ("a2c", "a2c-model", "ldn", "ppo", "ppo-model", "ppo-ldn")
         ]
         _add_overheads(result["training"])
+    if "mujoco" in sections:
+        result["mujoco"] = mujoco_section()
     if "rejax" in sections:
         result["ppo_vs_rejax"] = ppo_vs_rejax(args.anchor_python)
     print(json.dumps(result))
+
+
+def mujoco_section() -> dict:
+    """MJX (and brax generalized) env steps/s at 64 envs, and ldn training steps/s, for
+    inverted_pendulum and halfcheetah: each in a fresh subprocess, so compiles do not pile up
+    in one process's memory."""
+    here = Path(__file__).resolve().parent
+    rows: dict = {"env": [], "train": []}
+    for task in ("inverted_pendulum", "halfcheetah"):
+        for backend in ("mjx", "generalized"):
+            cmd = [sys.executable, str(here / "mujoco_envs.py"), "--task", task]
+            rows["env"].append(_last_json([*cmd, "--backend", backend, "--envs", "64"]))
+        code = (
+            f"import json, sys; sys.path.insert(0, {str(here)!r}); from bench import training; "
+            f"print(json.dumps(training('ldn', seeds=1, episodes=8, env={task!r}, "
+            "chunk_iterations=1)))"
+        )
+        rows["train"].append(_last_json([sys.executable, "-c", code]))
+    return rows
+
+
+def _last_json(cmd: list[str]) -> dict:
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    if done.returncode != 0:
+        return {"cmd": " ".join(cmd[1:3]), "failed": done.stderr.strip().splitlines()[-1:]}
+    return json.loads(done.stdout.strip().splitlines()[-1])
 
 
 def _add_overheads(rows: list[dict]) -> None:

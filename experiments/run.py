@@ -30,6 +30,7 @@ from ldn_jax import checkpoint
 from ldn_jax.config import (
     ALGORITHMS,
     BACKENDS,
+    DEFAULT_CHUNK,
     DEFAULT_EPISODES,
     PRESETS,
     Config,
@@ -118,6 +119,8 @@ def build_config(args: argparse.Namespace) -> Config:
     )
     k = _parse_k(given("k"))
     overrides["k"] = k if ALGORITHMS.get(algo, ALGORITHMS["ldn"]).ld_stop else k[:1] or k
+    if overrides["env"] in DEFAULT_CHUNK:
+        overrides["chunk_iterations"] = DEFAULT_CHUNK[overrides["env"]]
     for flag in ("workers", "threshold", "chunk", "backend"):
         if getattr(args, flag) is not None:
             overrides[CONFIG_FLAGS[flag]] = getattr(args, flag)

@@ -211,6 +211,10 @@ DEFAULT_EPISODES = {"inverted_pendulum": 800}
 for _task in ("ant", "halfcheetah", "hopper", "reacher", "walker2d"):
     DEFAULT_EPISODES[_task] = 16
 
+DEFAULT_CHUNK = dict.fromkeys((*DEFAULT_EPISODES, "inverted_pendulum"), 1)
+"""One iteration per chunk where an iteration is long (MuJoCo): budgets are then not rounded
+up to 5 iterations, and the host logs and checkpoints after each."""
+
 PRESETS: dict[str, dict] = {
     "paper": {},
     # The tutorial code's -5 terminal reward, which speeds up CartPole learning at gamma 0.9.
