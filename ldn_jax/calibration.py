@@ -52,6 +52,8 @@ class ShadowSteps:
     """Learning degree of M1 vs M0 (eq. 3-6, the run's K)."""
     sigma2: Array
     """Eq. 3's deviation of M1 from M0 (LD before the sigmoid, unsaturated)."""
+    sigma2_reward: Array
+    """The reward's term of eq. 3's mean over output dims (sigma2 minus the next state's)."""
     one_step_error: Array
     compounding_error: Array
     disagreement: Array
@@ -113,7 +115,9 @@ def shadow_rollouts(
         action = trainer.learner.act(state.learner.params, k_act, imagined)
         onehot = jax.nn.one_hot(action, trainer.n_actions)
         predicted = _predict(trainer, state.model.params, imagined, onehot)
-        sigma2 = deviation(predicted, _predict(trainer, state.model.frozen, imagined, onehot))
+        frozen = _predict(trainer, state.model.frozen, imagined, onehot)
+        sigma2 = deviation(predicted, frozen)
+        sigma2_reward = 0.5 * jnp.square(predicted[..., -1] - frozen[..., -1]) / frozen.shape[-1]
         stop = stop_draw(k_stop, stop_probability(sigma2, k))
         env_keys = jax.random.split(k_env, episodes)
         true_next = step(env_keys, from_obs(imagined), action, params)[0]
@@ -129,6 +133,7 @@ def shadow_rollouts(
         out = ShadowSteps(
             ld=learning_degree(sigma2, k),
             sigma2=sigma2,
+            sigma2_reward=sigma2_reward,
             one_step_error=jnp.linalg.norm(next_obs - true_next, axis=-1),
             compounding_error=jnp.linalg.norm(next_obs - real_next, axis=-1),
             disagreement=disagreement,
@@ -261,6 +266,12 @@ def calibration_summary(steps: ShadowSteps) -> dict:
         entry["ld"] = {
             "mean": _finite(ld.mean()) if ld.size else None,
             "quantiles_10_50_90": np.percentile(ld, [10, 50, 90]).tolist() if ld.size else None,
+            "sigma2_mean": _finite(steps.sigma2[mask].mean()) if ld.size else None,
+            "sigma2_reward_share": _finite(
+                steps.sigma2_reward[mask].sum() / steps.sigma2[mask].sum()
+            )
+            if ld.size
+            else None,
         }
         summary[population] = entry
     summary["horizons"] = {

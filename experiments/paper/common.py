@@ -250,8 +250,10 @@ def out_dir(results: Path, name: str) -> Path:
     return path
 
 
-def write_json(path: Path, data: dict) -> None:
-    path.write_text(json.dumps(data, indent=1, allow_nan=False) + "\n")
+def write_json(path: Path, data: dict, compact: bool = False) -> None:
+    """Indented, or with `compact` one line (for files of long arrays); NaN is an error."""
+    text = json.dumps(data, indent=None if compact else 1, allow_nan=False)
+    path.write_text(text + "\n")
 
 
 def write_csv(path: Path, rows: list[dict]) -> None:

@@ -110,6 +110,7 @@ def _panel(ax, axis: dict, xlabel: str, title: str):
     y = np.linspace(0, 1, LD_BINS + 1)
     mesh = ax.pcolormesh(x, y, fraction.T, vmin=0, vmax=1, cmap="viridis")
     ax.set_xlabel(f"{xlabel} (bins of {width})")
+    ax.xaxis.set_major_formatter(lambda v, _: f"{v / 1000:g}k" if v >= 1000 else f"{v:g}")
     ax.set_ylabel("learning degree")
     ax.set_title(title, fontsize=9)
     return mesh
@@ -162,7 +163,7 @@ def main(argv: list[str] | None = None) -> int:
         "steps binned by the cumulative real env steps at which they were imagined",
         "runs": data,
     }
-    common.write_json(out / "figure5.json", record)
+    common.write_json(out / "figure5.json", record, compact=True)
     figure(data, scale.ld_env, out / "figure5.png")
     print(f"wrote {out}/figure5.png, figure5.json")
     return 0

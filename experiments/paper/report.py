@@ -15,6 +15,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
+from scipy import stats
+
 from experiments.paper import common
 
 NAMES = ("table2", "table3", "figure5", "figure9", "calibration", "table4", "table5")
@@ -117,36 +119,59 @@ def _by_env(rows: list[dict]) -> dict[str, dict[str, dict]]:
     return out
 
 
+PAPER_ORDER = ("ldn", "a2c-model", "a2c")
+"""The paper's Table 2 ordering, fewest episodes first."""
+
+
+def compare(a: dict, b: dict) -> str:
+    """`a` vs `b` (rows with per-seed episodes): the difference of means and a two-sided
+    Mann-Whitney p over the seeds that reached the threshold."""
+    x = [v for v in a["episodes_to_threshold"] if v is not None]
+    y = [v for v in b["episodes_to_threshold"] if v is not None]
+    if len(x) < 2 or len(y) < 2:
+        return f"{algo_name(a['algo'])} vs {algo_name(b['algo'])}: too few runs reached"
+    p = stats.mannwhitneyu(x, y).pvalue
+    paper = a["paper_mean"] < b["paper_mean"]
+    ours = a["mean"] < b["mean"]
+    agree = "as in the paper" if ours == paper else "unlike the paper"
+    return (
+        f"{algo_name(a['algo'])} {a['mean'] - b['mean']:+.0f} episodes vs "
+        f"{algo_name(b['algo'])} (Mann-Whitney p = {p:.2g}; {agree})"
+    )
+
+
 def table2_findings(rows: list[dict]) -> list[str]:
     findings = []
     for env, algos in _by_env(rows).items():
         means = {a: r["mean"] for a, r in algos.items() if r["mean"] is not None}
         reached = ", ".join(f"{algo_name(a)} {r['reached']}/{r['runs']}" for a, r in algos.items())
-        if len(means) < len(algos):
-            findings.append(f"Table 2, {env}: some algorithm never reached the threshold.")
-            continue
         order = sorted(means, key=means.get)
         ours = " < ".join(f"{algo_name(a)} ({means[a]:.0f})" for a in order)
-        paper_order = ["ldn", "a2c-model", "a2c"]
-        same = order == [a for a in paper_order if a in means]
-        ldn_best = order[0] == "ldn"
-        ratio = [
-            means[a] / r["paper_mean"] for a, r in algos.items() if r["paper_mean"] is not None
-        ]
-        if same:
+        if order == [a for a in PAPER_ORDER if a in means] and len(means) == len(algos):
             verdict = "REPRODUCED (the paper's ordering MBRL-LDN < A3C-Model < A3C)"
-        elif ldn_best:
+        elif order and order[0] == "ldn":
             verdict = "PARTLY reproduced (MBRL-LDN fewest, the rest in another order)"
         else:
             verdict = "NOT reproduced (the paper: MBRL-LDN < A3C-Model < A3C)"
-        spread = ""
-        if ratio:
-            spread = (
-                f"; ours take {min(ratio):.1f}-{max(ratio):.1f}x the paper's episodes"
-                " in absolute terms"
-            )
+        pairs = [
+            compare(algos[a], algos[b])
+            for a, b in (("ldn", "a2c"), ("ldn", "a2c-model"), ("a2c-model", "a2c"))
+            if a in algos and b in algos and a in means and b in means
+        ]
+        ratio = [
+            means[a] / r["paper_mean"]
+            for a, r in algos.items()
+            if a in means and r["paper_mean"] is not None
+        ]
+        scale = (
+            f" In absolute terms ours take {min(ratio):.1f}-{max(ratio):.1f}x the paper's episodes."
+            if ratio
+            else ""
+        )
         findings.append(
-            f"Table 2, {env}: mean episodes {ours}: {verdict}{spread}; reached: {reached}."
+            f"Table 2, {env}: mean episodes {ours or 'none reached'}: {verdict}. "
+            + "; ".join(pairs)
+            + f". Reached: {reached}.{scale}"
         )
     return findings
 
@@ -316,8 +341,8 @@ def calibration_section(data: dict | None) -> tuple[list[str], list[str]]:
         "",
         "| episodes | steps | Spearman LD vs 1-step error | AUC of LD | AUC of 1 - LD | Pearson "
         "LD vs 1-step | Spearman LD vs compounding | Spearman disagreement vs 1-step | AUC of "
-        "disagreement | mean LD |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "disagreement | mean LD | mean sigma2 | reward's share of sigma2 |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     num = lambda v: "–" if v is None else f"{v:.3f}"
     for p in data["points"]:
@@ -328,7 +353,8 @@ def calibration_section(data: dict | None) -> tuple[list[str], list[str]]:
             f"| {p['episodes']:,} | {im['steps']:,} | {num(one['ld']['spearman'])} | {num(auc)} | "
             f"{num(None if auc is None else 1 - auc)} | {num(one['ld']['pearson'])} | "
             f"{num(comp['ld']['spearman'])} | {num(one['disagreement']['spearman'])} | "
-            f"{num(one['disagreement']['auc_error_above_median'])} | {num(im['ld']['mean'])} |"
+            f"{num(one['disagreement']['auc_error_above_median'])} | {num(im['ld']['mean'])} | "
+            f"{num(im['ld'].get('sigma2_mean'))} | {num(im['ld'].get('sigma2_reward_share'))} |"
         )
     lines += [
         "",
@@ -368,6 +394,17 @@ def calibration_section(data: dict | None) -> tuple[list[str], list[str]]:
             flags = "it flags high error" if d_auc > 0.55 else "it does not flag high error"
             ens = f"; the ensemble disagreement's AUC is {d_auc:.3f} ({flags})"
         h = last["pooled"]["horizons"]["ld_rule"]
+        ld = last["pooled"]["imagined"]["ld"]
+        if ld.get("sigma2_mean"):
+            # tanh(K sigma2 / 2) = 0.9 at K sigma2 = 2 artanh(0.9) = 2.944.
+            findings.append(
+                f"Why LD stays low: at {last['episodes']:,} episodes M1 deviates from M0 by "
+                f"sigma2 = {ld['sigma2_mean']:.3f} on average over imagined steps, "
+                f"{100 * ld['sigma2_reward_share']:.0f}% of it in the reward output; LD = "
+                f"tanh(K sigma2 / 2) averages {ld['mean']:.3f}, so each imagined step stops "
+                f"with probability about {1 - ld['mean']:.2f}. LD = 0.9 at that sigma2 would "
+                f"need K = {2.944 / ld['sigma2_mean']:.0f}."
+            )
         findings.append(
             f"LD calibration at {last['episodes']:,} episodes: AUC of LD for high one-step error "
             f"{auc:.3f} (1 - LD: {1 - auc:.3f}): {how}{ens}. The LD rule's imagined episodes "
