@@ -262,15 +262,13 @@ def calibration_summary(steps: ShadowSteps) -> dict:
             per_score["non_finite"] = int((valid & ~np.isfinite(error)).sum())
             per_score["median"] = _finite(np.median(error[keep])) if keep.any() else None
             entry[error_name] = per_score
-        ld = steps.ld[mask]
+        ld, sigma2 = steps.ld[mask], steps.sigma2[mask].sum()
         entry["ld"] = {
             "mean": _finite(ld.mean()) if ld.size else None,
             "quantiles_10_50_90": np.percentile(ld, [10, 50, 90]).tolist() if ld.size else None,
             "sigma2_mean": _finite(steps.sigma2[mask].mean()) if ld.size else None,
-            "sigma2_reward_share": _finite(
-                steps.sigma2_reward[mask].sum() / steps.sigma2[mask].sum()
-            )
-            if ld.size
+            "sigma2_reward_share": _finite(steps.sigma2_reward[mask].sum() / sigma2)
+            if sigma2 > 0
             else None,
         }
         summary[population] = entry
