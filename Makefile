@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: run test test-slow lint format bench clean
+.PHONY: run test test-slow lint format bench paper clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -31,6 +31,12 @@ format: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) bench/bench.py
+
+# The paper's CartPole results into experiments/results/ (REPORT.md there); SCALE=paper for the
+# larger budget. Training runs are kept in experiments/results/runs/ and reused.
+SCALE ?= cpu
+paper: $(STAMP)
+	$(PY) experiments/paper/all.py --scale $(SCALE)
 
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache

@@ -39,3 +39,17 @@ def stop_probability(sigma2: Array, k: Array | float = 1.0) -> Array:
 def stop_draw(key: Array, p_stop: Array) -> Array:
     """Stop where u < P(stop), u ~ U[0, 1): with P(stop) = 1 - LD this is eq. 5."""
     return jax.random.uniform(key, p_stop.shape) < p_stop
+
+
+LD_BINS = 10
+"""Bins of `ld_histogram`: [0, 0.1), [0.1, 0.2), ..., [0.9, 1]."""
+
+
+def ld_histogram(ld: Array, weight: Array) -> Array:
+    """Weighted count of steps per LD bin (`LD_BINS` equal bins of [0, 1]): `[...] x2 -> [10]`.
+
+    Training records it per iteration over the imagined steps (the paper's Figure 5), a few
+    numbers on device instead of every step's LD.
+    """
+    bins = jnp.clip((ld * LD_BINS).astype(jnp.int32), 0, LD_BINS - 1)
+    return (jax.nn.one_hot(bins, LD_BINS) * weight[..., None]).reshape(-1, LD_BINS).sum(axis=0)

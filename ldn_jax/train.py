@@ -21,6 +21,7 @@ from ldn_jax.dynamics import Dynamics, ModelState
 from ldn_jax.imagination import model_world
 from ldn_jax.learners import LEARNERS
 from ldn_jax.learners.base import LearnerState
+from ldn_jax.learning_degree import ld_histogram
 from ldn_jax.rollout import Episodes, play_episodes
 
 Array = jax.Array
@@ -251,7 +252,9 @@ class Trainer:
             state, imagined = self.imagine_stage(state, k_imagine, k)
             weight = imagined.steps.weight
             imagined_steps = weight.sum().astype(jnp.int32)
-            metrics["ld_mean"] = (imagined.extras["ld"] * weight).sum() / weight.sum()
+            ld = imagined.extras["ld"]
+            metrics["ld_mean"] = (ld * weight).sum() / weight.sum()
+            metrics["ld_histogram"] = ld_histogram(ld, weight)  # Figure 5's data
             metrics["imagined_length"] = imagined.lengths.mean()
             metrics["imagined_return"] = imagined.returns.mean()
             metrics.update({f"imagined_{n}": v for n, v in imagined.losses.items()})

@@ -1,0 +1,47 @@
+"""Every paper script in order, in one process (`make paper`), then REPORT.md.
+
+    python experiments/paper/all.py [--scale cpu|paper] [--smoke] [--results DIR]
+
+The same as running table2.py, table3.py, figure4.py, figure5.py, figure9.py, calibration.py,
+table4.py, table5.py and report.py one after the other with the same flags; one process
+compiles each training program once.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+
+from experiments.paper import (
+    calibration,
+    figure4,
+    figure5,
+    figure9,
+    report,
+    table2,
+    table3,
+    table4,
+    table5,
+)
+
+SCRIPTS = (table2, table3, figure4, figure5, figure9, calibration, table4, table5, report)
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    for script in SCRIPTS:
+        name = script.__name__.rsplit(".", 1)[-1]
+        start = time.perf_counter()
+        print(f"== {name}", flush=True)
+        status = script.main(argv)
+        print(f"== {name}: {time.perf_counter() - start:.0f}s", flush=True)
+        if status:
+            return status
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,309 @@
+"""What the paper scripts share: scales, the training runs they share, the paper's numbers,
+and result files.
+
+Every script takes `--scale cpu|paper` (default cpu), `--smoke` (a tiny budget, for tests) and
+`--results DIR` (default experiments/results), and writes into `DIR/<its name>/`. Training runs
+live under `DIR/runs/<scale>/` (not in git); a script that needs a run trains it, or reuses it
+when a finished run with the same config is there, or resumes it when one was interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import os
+import platform
+import shutil
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+if str(ROOT) not in sys.path:  # run as `python experiments/paper/NAME.py`
+    sys.path.insert(0, str(ROOT))
+
+from experiments.run import RUN_FORMAT, train  # noqa: E402
+from ldn_jax.config import Config, from_preset, validate  # noqa: E402
+
+RESULTS = ROOT / "experiments" / "results"
+
+
+@dataclass(frozen=True)
+class Scale:
+    """How big the reproduction runs are."""
+
+    name: str
+    seeds: int
+    """Seeds per run (the paper: 10 runs per result)."""
+    episodes: int
+    """Real episodes per seed (summed over workers)."""
+    workers: int
+    chunk_iterations: int
+    cartpole_envs: tuple[str, ...]
+    """The CartPole versions of Tables 2 and 3 and Figure 4."""
+    ld_env: str
+    """The env of the LD studies (Figures 5 and 9, calibration): the paper's cartpole-v2."""
+    calibration_points: tuple[int, ...]
+    """Episodes after which the LD calibration study analyses the model; the last is the
+    Table 2 run's final checkpoint."""
+    calibration_episodes: int
+    """Imagined episodes per seed in each calibration analysis."""
+    ensemble_members: int
+    """E: models of the ensemble-disagreement learning degree in the calibration study."""
+
+
+CARTPOLE = ("cartpole-v0", "cartpole-v1", "cartpole-v2")
+
+SCALES = {
+    # Tests: a tiny budget on one CartPole version (compiling dominates), every code path.
+    "smoke": Scale("smoke", 2, 16, 4, 2, ("cartpole-v0",), "cartpole-v0", (8, 16), 4, 2),
+    # The default: the paper's 10 seeds with a budget most runs cross within (episodes to
+    # threshold measured on these 2 cores: a2c ~900-1300, a2c-model ~450-610, ldn ~850-1150).
+    "cpu": Scale("cpu", 10, 2000, 8, 5, CARTPOLE, "cartpole-v2", (200, 800, 2000), 32, 5),
+    # A budget every run should cross within, and larger calibration samples.
+    "paper": Scale(
+        "paper", 10, 4000, 8, 5, CARTPOLE, "cartpole-v2", (200, 800, 2000, 4000), 128, 10
+    ),
+}
+
+
+def parse_args(argv: list[str] | None, description: str) -> tuple[Scale, Path]:
+    p = argparse.ArgumentParser(description=description)
+    p.add_argument("--scale", choices=("cpu", "paper"), default="cpu", help="default: cpu")
+    p.add_argument("--smoke", action="store_true", help="tiny budget (tests); overrides --scale")
+    p.add_argument("--results", type=Path, default=RESULTS, help=f"default: {RESULTS}")
+    args = p.parse_args(argv)
+    _compile_cache(args.results)
+    return SCALES["smoke" if args.smoke else args.scale], args.results
+
+
+def _compile_cache(results: Path) -> None:
+    """JAX's persistent compilation cache under the runs: the scripts compile the same
+    training programs again (calibration.py retrains the cartpole-v2 ldn run in-process)."""
+    import jax
+
+    jax.config.update("jax_compilation_cache_dir", str(results / "runs" / "jax-cache"))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+
+
+# -- the paper's numbers (shared/PAPER.md) -----------------------------------------------------
+
+PAPER_ALGOS = {"a2c": "A3C", "a2c-model": "A3C-Model", "ldn": "MBRL-LDN"}
+"""Our algorithm names -> the paper's (A2C is our synchronous A3C)."""
+
+PAPER_TABLE2 = {
+    ("a2c", "cartpole-v0"): (346.4, 44.5),
+    ("a2c", "cartpole-v1"): (296.5, 46.7),
+    ("a2c", "cartpole-v2"): (380.8, 22.7),
+    ("a2c-model", "cartpole-v0"): (286.1, 53.4),
+    ("a2c-model", "cartpole-v1"): (280.6, 61.1),
+    ("a2c-model", "cartpole-v2"): (259.8, 35.7),
+    ("ldn", "cartpole-v0"): (244.6, 35.4),
+    ("ldn", "cartpole-v1"): (231.5, 52.6),
+    ("ldn", "cartpole-v2"): (229.5, 18.4),
+}
+"""Episodes to threshold, (mean, s.d.) over 10 runs."""
+
+PAPER_TABLE3 = {
+    ("a2c", "cartpole-v0"): 625.5,
+    ("a2c", "cartpole-v1"): 613.2,
+    ("a2c", "cartpole-v2"): 723.1,
+    ("a2c-model", "cartpole-v0"): 974.4,
+    ("a2c-model", "cartpole-v1"): 965.5,
+    ("a2c-model", "cartpole-v2"): 1538.1,
+    ("ldn", "cartpole-v0"): 931.5,
+    ("ldn", "cartpole-v1"): 933.3,
+    ("ldn", "cartpole-v2"): 1522.4,
+}
+"""Wall-clock seconds to threshold."""
+
+PAPER_TABLE4 = {
+    "ant": (3124.7, 3882.4),
+    "halfcheetah": (5963.3, 6593.2),
+    "hopper": (4153.8, 4984.0),
+    "reacher": (5546.3, 7624.9),
+    "walker2d": (5923.6, 6124.7),
+    "inverted_pendulum": (7842.1, 10864.3),
+}
+"""Total moving reward, (A3C-Model, MBRL-LDN)."""
+
+PAPER_TABLE5 = {
+    "inverted_pendulum": (2463, 2465, 2175),
+    "halfcheetah": (2601, 2254, 1734),
+    "hopper": (2603, 2504, 2397),
+}
+"""Episodes to reach the top, (PPO2, PPO2-Model, PPO2-LDN)."""
+
+# -- runs ---------------------------------------------------------------------------------------
+
+
+def run_config(scale: Scale, env: str, algo: str, k: tuple[float, ...] = (1.0,)) -> Config:
+    """The paper preset at this scale. Raises ValueError for a run this scale does not do:
+    the scripts report such rows as pending. The MuJoCo rows run at the paper scale only
+    (1,000-step MJX episodes take hours on CPU at the budgets the tables need)."""
+    if env not in CARTPOLE and scale.name != "paper":
+        raise ValueError(f"{env} runs at --scale paper only (MJX on CPU is too slow here)")
+    return validate(
+        from_preset(
+            "paper",
+            env=env,
+            algo=algo,
+            k=k,
+            seeds=scale.seeds,
+            episodes=scale.episodes,
+            workers=scale.workers,
+            chunk_iterations=scale.chunk_iterations,
+        )
+    )
+
+
+def run_dir(results: Path, scale: Scale, config: Config) -> Path:
+    name = f"{config.env}-{config.algo}"
+    if len(config.k) > 1 or config.k != (1.0,):
+        name += "-k" + ",".join(f"{k:g}" for k in config.k)
+    return results / "runs" / scale.name / name
+
+
+def ensure_run(config: Config, out: Path) -> dict:
+    """The summary of the run of `config` in `out`: reused if finished, resumed if it was
+    interrupted, trained from scratch otherwise (a run of another config there is replaced)."""
+    stored = out / "config.json"
+    wanted = json.loads(json.dumps({"run_format": RUN_FORMAT, **config.to_dict()}))
+    if stored.exists():
+        if json.loads(stored.read_text()) == wanted:
+            if (out / "summary.json").exists() and (out / "checkpoints" / "final").is_dir():
+                return json.loads((out / "summary.json").read_text())
+            print(f"resuming {out}", flush=True)
+            return train(config, out, checkpoint_every=10, quiet=True, resume=True)
+        shutil.rmtree(out)
+    out.mkdir(parents=True, exist_ok=True)
+    print(f"training {config.env} {config.algo} K={config.k} -> {out}", flush=True)
+    summary = train(config, out, checkpoint_every=10, quiet=True)
+    print(
+        f"  done: train {summary['train_seconds']:.0f}s, compile {summary['compile_seconds']:.0f}s",
+        flush=True,
+    )
+    return summary
+
+
+def collect_runs(
+    envs: tuple[str, ...], algos: tuple[str, ...], scale: Scale, results: Path, k=(1.0,)
+) -> list[dict]:
+    """Ensure the run of every env x algo; one entry each, in order: `{env, algo, status:
+    "done", dir, config, summary}`, or `{env, algo, status: "pending", reason}` for a run the
+    trainer cannot do yet (the MuJoCo rows until continuous actions land)."""
+    entries = []
+    for env in envs:
+        for algo in algos:
+            try:
+                config = run_config(scale, env, algo, k)
+            except ValueError as error:
+                entries.append(
+                    {"env": env, "algo": algo, "status": "pending", "reason": str(error)}
+                )
+                continue
+            out = run_dir(results, scale, config)
+            summary = ensure_run(config, out)
+            entries.append(
+                {
+                    "env": env,
+                    "algo": algo,
+                    "status": "done",
+                    "dir": out,
+                    "config": config,
+                    "summary": summary,
+                }
+            )
+    return entries
+
+
+def load_history(out: Path) -> dict[str, np.ndarray]:
+    """The run's per-iteration metrics `{name: [K, S, N, ...]}` (checkpoints/final.host.npz)."""
+    with np.load(out / "checkpoints" / "final.host.npz") as host:
+        return {n.split("/", 1)[1]: host[n] for n in host.files if n.startswith("history/")}
+
+
+# -- statistics and files -----------------------------------------------------------------------
+
+
+def describe(values: list[float | None]) -> dict:
+    """min, max, mean, s.d. (ddof 1) over the runs that have a value; `reached` counts them."""
+    have = np.array([v for v in values if v is not None], float)
+    out = {"reached": int(have.size), "runs": len(values)}
+    if have.size == 0:
+        return {**out, "min": None, "max": None, "mean": None, "sd": None}
+    sd = float(have.std(ddof=1)) if have.size > 1 else None
+    return {
+        **out,
+        "min": float(have.min()),
+        "max": float(have.max()),
+        "mean": float(have.mean()),
+        "sd": sd,
+    }
+
+
+def out_dir(results: Path, name: str) -> Path:
+    path = results / name
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def write_json(path: Path, data: dict, compact: bool = False) -> None:
+    """Indented, or with `compact` one line (for files of long arrays); NaN is an error."""
+    text = json.dumps(data, indent=None if compact else 1, allow_nan=False)
+    path.write_text(text + "\n")
+
+
+def write_csv(path: Path, rows: list[dict]) -> None:
+    """Rows of scalars; a missing or None value is written as an empty cell."""
+    fields = list(dict.fromkeys(name for row in rows for name in row))
+    with open(path, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=fields)
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({k: _cell(v) for k, v in row.items()})
+
+
+def _cell(value):
+    if isinstance(value, float):
+        return "" if not math.isfinite(value) else f"{value:.6g}"
+    return "" if value is None else value
+
+
+def scale_record(scale: Scale) -> dict:
+    """What every result file records about how it was made."""
+    return {
+        "scale": scale.name,
+        "seeds": scale.seeds,
+        "episodes": scale.episodes,
+        "workers": scale.workers,
+        "preset": "paper",
+        "machine": machine(),
+    }
+
+
+def machine() -> dict:
+    import jax
+    import jaxlib
+
+    model = "unknown"
+    cpuinfo = Path("/proc/cpuinfo")
+    if cpuinfo.exists():
+        for line in cpuinfo.read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    return {
+        "cpu": model,
+        "cores": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
+        "jax_backend": jax.default_backend(),
+        "jax": jax.__version__,
+        "jaxlib": jaxlib.__version__,
+        "python": platform.python_version(),
+        "date": time.strftime("%Y-%m-%d"),
+    }

@@ -1,0 +1,297 @@
+"""Does the learning degree know when the model is wrong? Shadow rollouts (analysis only).
+
+Imagined episodes are played in M1 as training plays them (the sampled policy, from a fresh
+initial state, until predicted termination or the step limit), and the real env is stepped
+alongside with the same actions (the "shadow"). Per imagined step this records:
+- `one_step_error`: ||M1(s_t, a_t) - env(s_t, a_t)|| on the next state, from the imagined s_t;
+- `compounding_error`: ||s^_{t+1} - s_{t+1}||, the imagined trajectory against the real one
+  played from the same initial state with the same actions;
+- the learning degree of M1 vs M0 (eq. 3-6) and whether the LD draw would have stopped here;
+- optionally the disagreement of an ensemble of E extra models fitted on the same real buffer,
+  mapped to a learning degree with the same K (`ensemble_learning_degree`).
+
+Nothing here changes training: it reads a `TrainState` and returns arrays.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import struct
+from scipy import stats
+
+from envs import cartpole
+from ldn_jax import checkpoint
+from ldn_jax.config import Config
+from ldn_jax.learning_degree import deviation, learning_degree, stop_draw, stop_probability
+from ldn_jax.policy import FINAL_CHECKPOINT
+from ldn_jax.train import Trainer, TrainState
+
+Array = jax.Array
+
+
+def _cartpole_state(obs: Array) -> cartpole.EnvState:
+    return cartpole.EnvState(physics=obs, time=jnp.zeros((), jnp.int32))
+
+
+STATE_FROM_OBS = {cartpole.CartPole: _cartpole_state}
+"""Env type -> `obs [d] -> env state`. The one-step error steps the real env from an imagined
+observation, so it needs envs whose observation is their whole state."""
+
+
+@struct.dataclass
+class ShadowSteps:
+    """Per imagined step, time-major: every field `[T, N]` (T = the env's step limit,
+    N episodes). Steps after an episode's end are kept (masks below say which count)."""
+
+    ld: Array
+    """Learning degree of M1 vs M0 (eq. 3-6, the run's K)."""
+    sigma2: Array
+    """Eq. 3's deviation of M1 from M0 (LD before the sigmoid, unsaturated)."""
+    sigma2_reward: Array
+    """The reward's term of eq. 3's mean over output dims (sigma2 minus the next state's)."""
+    one_step_error: Array
+    compounding_error: Array
+    disagreement: Array
+    """Ensemble disagreement: 1/2 the variance over members, mean over output dims (eq. 3's
+    form); zero without an ensemble."""
+    live: Array
+    """The imagined episode is running: before predicted termination (the a2c-model rule)."""
+    ld_live: Array
+    """... and the LD draw has not stopped it yet: the steps MBRL-LDN trains on."""
+    ensemble_live: Array
+    """... and a draw with the ensemble's learning degree has not stopped it yet."""
+    real_live: Array
+    """The shadow real episode has not terminated before this step."""
+
+
+def ensemble_learning_degree(disagreement: Array, k: Array | float = 1.0) -> Array:
+    """Eq. 4/6's mapping applied to ensemble disagreement, flipped: 2 sigmoid(-K d), in (0, 1].
+
+    M1's deviation from M0 grows with what it has learned; disagreement grows with what the
+    models do not know. So LD is 1 where the members agree and falls as they disagree, and the
+    stop probability 1 - LD = 2 sigmoid(K d) - 1 is eq. 4 on the disagreement.
+    """
+    return 2.0 * jax.nn.sigmoid(-k * disagreement)
+
+
+def _predict(trainer: Trainer, params: dict, obs: Array, onehot: Array) -> Array:
+    """`[N, obs], [N, A] -> [N, obs + 1]`: the model's [s', r], as eq. 2 and 3 see it."""
+    next_obs, reward = trainer.dynamics.predict(params, obs, onehot)
+    return jnp.concatenate([next_obs, reward[..., None]], axis=-1)
+
+
+def shadow_rollouts(
+    trainer: Trainer,
+    state: TrainState,
+    key: Array,
+    episodes: int,
+    k: Array | float,
+    ensemble: dict | None = None,
+) -> ShadowSteps:
+    """Play `episodes` imagined episodes in one run's M1 with the real env alongside.
+
+    `state` is one seed's (unbatched) state of a model-based run; `ensemble` is a stack of
+    model parameters `[E, ...]` (see `fit_ensemble`) or None.
+    """
+    env, params = trainer.env, trainer.env_params
+    if type(env) not in STATE_FROM_OBS:
+        raise ValueError(f"shadow rollouts need an env whose observation is its state, not {env}")
+    if trainer.dynamics is None:
+        raise ValueError("shadow rollouts need a model-based run (a2c-model, ldn, ...)")
+    from_obs = jax.vmap(STATE_FROM_OBS[type(env)])
+    step = jax.vmap(env.step, (0, 0, 0, None))
+    k_reset, k_play = jax.random.split(key)
+    obs, real = jax.vmap(env.reset, (0, None))(jax.random.split(k_reset, episodes), params)
+    ones = jnp.ones((episodes,), bool)
+
+    def body(carry, key):
+        imagined, real, live, ld_live, ensemble_live, real_live = carry
+        k_act, k_stop, k_ensemble, k_env = jax.random.split(key, 4)
+        action = trainer.learner.act(state.learner.params, k_act, imagined)
+        onehot = trainer.learner.policy.model_action(action)
+        predicted = _predict(trainer, state.model.params, imagined, onehot)
+        frozen = _predict(trainer, state.model.frozen, imagined, onehot)
+        sigma2 = deviation(predicted, frozen)
+        sigma2_reward = 0.5 * jnp.square(predicted[..., -1] - frozen[..., -1]) / frozen.shape[-1]
+        stop = stop_draw(k_stop, stop_probability(sigma2, k))
+        env_keys = jax.random.split(k_env, episodes)
+        true_next = step(env_keys, from_obs(imagined), action, params)[0]
+        real_next, real, _, real_terminated, _, _ = step(env_keys, real, action, params)
+        next_obs = predicted[..., :-1]
+        if ensemble is None:
+            disagreement = jnp.zeros_like(sigma2)
+        else:
+            members = jax.vmap(lambda p: _predict(trainer, p, imagined, onehot))(ensemble)
+            disagreement = 0.5 * members.var(axis=0).mean(axis=-1)
+        p_continue = ensemble_learning_degree(disagreement, k)
+        ensemble_stop = jax.random.uniform(k_ensemble, p_continue.shape) >= p_continue
+        out = ShadowSteps(
+            ld=learning_degree(sigma2, k),
+            sigma2=sigma2,
+            sigma2_reward=sigma2_reward,
+            one_step_error=jnp.linalg.norm(next_obs - true_next, axis=-1),
+            compounding_error=jnp.linalg.norm(next_obs - real_next, axis=-1),
+            disagreement=disagreement,
+            live=live,
+            ld_live=ld_live,
+            ensemble_live=ensemble_live,
+            real_live=real_live,
+        )
+        live = live & ~env.is_terminal(next_obs, params)
+        carry = (
+            next_obs,
+            real,
+            live,
+            ld_live & live & ~stop,
+            ensemble_live & live & ~ensemble_stop,
+            real_live & ~real_terminated,
+        )
+        return carry, out
+
+    init = (obs, real, ones, ones, ones, ones)
+    keys = jax.random.split(k_play, trainer.max_steps)
+    return jax.lax.scan(body, init, keys)[1]
+
+
+def fit_ensemble(
+    trainer: Trainer, state: TrainState, key: Array, members: int, rounds: int
+) -> tuple[dict, Array]:
+    """E models of M1's architecture from fresh initialisations, each fitted like M1 for
+    `rounds` x `model.updates` minibatch steps on the run's real buffer (its own minibatches).
+
+    Returns their parameters stacked `[E, ...]` and each member's last mean loss `[E]`.
+    M1 saw the buffer grow over training; the members see only its final content.
+    """
+    dynamics = trainer.dynamics
+
+    def member(key: Array):
+        k_init, k_fit = jax.random.split(key)
+        model = dynamics.init(k_init)
+        fit = lambda model, key: dynamics.fit(model, state.buffer, key)
+        model, losses = jax.lax.scan(fit, model, jax.random.split(k_fit, rounds))
+        return model.params, losses[-1] if rounds else jnp.zeros(())
+
+    return jax.vmap(member)(jax.random.split(key, members))
+
+
+def load_run(run_dir: str | Path) -> tuple[Config, Trainer, TrainState]:
+    """A finished run's config, trainer and batched final state `[K, S]` (as `load_policy`)."""
+    run_dir = Path(run_dir)
+    config = Config.from_dict(json.loads((run_dir / "config.json").read_text()))
+    trainer = Trainer(config)
+    like = jax.eval_shape(trainer.init_batch)
+    states = checkpoint.restore(run_dir / "checkpoints" / FINAL_CHECKPOINT, like)
+    return config, trainer, states
+
+
+# -- host-side summaries (numpy) -----------------------------------------------------------
+
+HORIZON_EDGES = (1, 2, 3, 5, 10, 20, 50, 100, 200, 500, 1000)
+"""Bins of the imagined-horizon histograms: [1, 2), [2, 3), ..., [500, 1000), [1000, inf)."""
+
+
+def auc(score: np.ndarray, positive: np.ndarray) -> float | None:
+    """ROC AUC of `score` for the labels `positive` (Mann-Whitney, ties counted half)."""
+    n_pos, n_neg = int(positive.sum()), int((~positive).sum())
+    if n_pos == 0 or n_neg == 0:
+        return None
+    ranks = stats.rankdata(score)
+    return float((ranks[positive].sum() - n_pos * (n_pos + 1) / 2) / (n_pos * n_neg))
+
+
+def _finite(value: float) -> float | None:
+    return float(value) if np.isfinite(value) else None
+
+
+def association(score: np.ndarray, error: np.ndarray) -> dict:
+    """Pearson and Spearman correlation of `score` with `error`, and the ROC AUC of `score`
+    for "error above its median". 1 - AUC is the AUC of the reversed score."""
+    if score.size < 3 or np.ptp(score) == 0 or np.ptp(error) == 0:
+        return {"pearson": None, "spearman": None, "auc_error_above_median": None}
+    return {
+        "pearson": _finite(np.corrcoef(score, error)[0, 1]),
+        "spearman": _finite(stats.spearmanr(score, error).statistic),
+        "auc_error_above_median": auc(score, error > np.median(error)),
+    }
+
+
+def horizons(lengths: np.ndarray) -> dict:
+    """Distribution of imagined episode lengths `[N]`."""
+    counts, _ = np.histogram(lengths, bins=[*HORIZON_EDGES, np.inf])
+    return {
+        "episodes": int(lengths.size),
+        "mean": float(lengths.mean()),
+        "median": float(np.median(lengths)),
+        "p90": float(np.percentile(lengths, 90)),
+        "max": int(lengths.max()),
+        "bin_edges": list(HORIZON_EDGES),
+        "counts": counts.tolist(),
+    }
+
+
+SCORES = ("ld", "sigma2", "disagreement")
+
+
+def calibration_summary(steps: ShadowSteps) -> dict:
+    """Correlations and AUCs of each score with each error, and the horizon distributions.
+
+    `steps` holds numpy arrays `[T, N]` (or `[T, N']` pooled). Two populations of steps:
+    `imagined`, every step before predicted termination (the a2c-model rule), and `ld_rule`,
+    the steps the LD draw lets MBRL-LDN train on. The compounding error counts only while the
+    shadow real episode is running too. Non-finite errors (a diverged model) are left out and
+    counted.
+    """
+    summary = {}
+    for population, mask in (("imagined", steps.live), ("ld_rule", steps.ld_live)):
+        entry = {"steps": int(mask.sum())}
+        for error_name, valid in (
+            ("one_step_error", mask),
+            ("compounding_error", mask & steps.real_live),
+        ):
+            error = getattr(steps, error_name)
+            keep = valid & np.isfinite(error)
+            per_score = {
+                score: association(getattr(steps, score)[keep], error[keep]) for score in SCORES
+            }
+            per_score["steps"] = int(keep.sum())
+            per_score["non_finite"] = int((valid & ~np.isfinite(error)).sum())
+            per_score["median"] = _finite(np.median(error[keep])) if keep.any() else None
+            entry[error_name] = per_score
+        ld, sigma2 = steps.ld[mask], steps.sigma2[mask].sum()
+        entry["ld"] = {
+            "mean": _finite(ld.mean()) if ld.size else None,
+            "quantiles_10_50_90": np.percentile(ld, [10, 50, 90]).tolist() if ld.size else None,
+            "sigma2_mean": _finite(steps.sigma2[mask].mean()) if ld.size else None,
+            "sigma2_reward_share": _finite(steps.sigma2_reward[mask].sum() / sigma2)
+            if sigma2 > 0
+            else None,
+        }
+        summary[population] = entry
+    summary["horizons"] = {
+        "predicted_termination": horizons(steps.live.sum(0)),
+        "ld_rule": horizons(steps.ld_live.sum(0)),
+        "ensemble_rule": horizons(steps.ensemble_live.sum(0)),
+    }
+    return summary
+
+
+def binned_error(score: np.ndarray, error: np.ndarray, bins: int = 10) -> dict:
+    """Mean error per quantile bin of `score` (a calibration curve that works however
+    concentrated the score is)."""
+    if score.size == 0:
+        return {"score_mean": [], "error_mean": [], "count": []}
+    edges = np.unique(np.quantile(score, np.linspace(0, 1, bins + 1)))
+    index = np.clip(np.searchsorted(edges, score, side="right") - 1, 0, max(len(edges) - 2, 0))
+    out = {"score_mean": [], "error_mean": [], "count": []}
+    for b in range(max(len(edges) - 1, 1)):
+        hit = index == b
+        if hit.any():
+            out["score_mean"].append(float(score[hit].mean()))
+            out["error_mean"].append(float(error[hit].mean()))
+            out["count"].append(int(hit.sum()))
+    return out

@@ -1,0 +1,200 @@
+"""The paper scripts: their pure parts by hand-computed numbers, and every script's smoke run
+(tiny budget) by its output files and fields, REPORT.md included."""
+
+import csv
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from experiments.paper import figure5, report
+from ldn_jax import calibration as cal
+from ldn_jax.config import from_preset
+from ldn_jax.learning_degree import ld_histogram
+from ldn_jax.train import Trainer
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_ld_histogram_counts_weighted_steps_per_bin():
+    ld = jnp.array([[0.05, 0.15], [0.95, 1.0], [0.1, 0.5]])
+    weight = jnp.array([[1.0, 1.0], [1.0, 0.0], [1.0, 0.0]])
+    # 0.05 -> bin 0; 0.15 and 0.1 (a bin's lower edge) -> bin 1; 0.95 -> bin 9; 1.0 and 0.5
+    # carry weight 0.
+    expected = [1, 2, 0, 0, 0, 0, 0, 0, 0, 1]
+    np.testing.assert_array_equal(np.asarray(ld_histogram(ld, weight)), expected)
+
+
+def test_spread_conserves_counts_in_proportion_to_overlap():
+    counts = np.array([[2.0, 0.0], [0.0, 4.0]])
+    # Iteration 0 imagines steps [0, 250), iteration 1 steps [250, 1250).
+    out = figure5.spread(counts, np.array([250, 1250]), 500)
+    np.testing.assert_allclose(out, [[2, 1], [0, 2], [0, 1]])
+    placed = figure5.place(counts, np.array([400, 1001]), 500)
+    np.testing.assert_allclose(placed, [[2, 0], [0, 0], [0, 4]])
+
+
+def test_auc_and_association_by_hand():
+    score = np.array([0.1, 0.4, 0.35, 0.8])
+    positive = np.array([False, False, True, True])
+    assert cal.auc(score, positive) == 0.75  # 3 of the 4 (pos, neg) pairs ordered right
+    assert cal.auc(np.array([1.0, 1.0]), np.array([True, False])) == 0.5  # a tie counts half
+    assert cal.auc(score, np.zeros(4, bool)) is None
+    stats = cal.association(np.array([1.0, 2.0, 3.0, 4.0]), np.array([1.0, 2.0, 3.0, 5.0]))
+    assert stats["spearman"] == pytest.approx(1.0) and stats["auc_error_above_median"] == 1.0
+    assert cal.association(np.ones(5), np.arange(5.0))["pearson"] is None  # constant score
+
+
+def test_shadow_rollouts_of_an_untrained_model():
+    config = from_preset("paper", env="cartpole-v0", algo="ldn", seeds=1, workers=2)
+    trainer = Trainer(config)
+    state = trainer.init_state(jax.random.key(0))
+    # An "ensemble" of M1 twice: zero disagreement, so its learning degree is 1 and it never
+    # stops an episode.
+    twins = jax.tree.map(lambda p: jnp.stack([p, p]), state.model.params)
+    steps = jax.device_get(
+        jax.jit(cal.shadow_rollouts, static_argnums=(0, 3))(
+            trainer, state, jax.random.key(1), 6, 1.0, twins
+        )
+    )
+    assert steps.ld.shape == (200, 6)
+    # M1 == M0: LD = 0, so the LD draw stops every imagined episode after its first step.
+    np.testing.assert_array_equal(steps.ld, 0.0)
+    np.testing.assert_array_equal(steps.ld_live.sum(0), 1)
+    np.testing.assert_array_equal(steps.disagreement, 0.0)
+    np.testing.assert_array_equal(steps.ensemble_live, steps.live)
+    # Imagined and real trajectories start from the same state with the same action.
+    np.testing.assert_allclose(steps.compounding_error[0], steps.one_step_error[0], rtol=1e-6)
+    assert (steps.one_step_error[0] > 0).all()  # an untrained model is wrong
+    for mask in (steps.live, steps.real_live):  # once over, an episode stays over
+        assert (np.diff(mask.astype(int), axis=0) <= 0).all()
+    assert float(cal.ensemble_learning_degree(jnp.float32(0.0), 2.0)) == 1.0
+    summary = cal.calibration_summary(steps)
+    assert summary["horizons"]["ld_rule"]["counts"][0] == 6
+    assert summary["imagined"]["one_step_error"]["ld"]["spearman"] is None  # LD is constant
+
+
+@pytest.fixture(scope="module")
+def smoke(tmp_path_factory):
+    """Every script at the smoke scale, in one process (`all.py`), into a fresh directory.
+
+    XLA's optimisations are off: compiling dominates a smoke run and the numbers do not matter.
+    """
+    results = tmp_path_factory.mktemp("results")
+    env = {**os.environ, "JAX_DISABLE_MOST_OPTIMIZATIONS": "1"}
+    command = [sys.executable, str(ROOT / "experiments/paper/all.py"), "--smoke"]
+    done = subprocess.run(
+        [*command, "--results", str(results)], capture_output=True, text=True, timeout=600, env=env
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    return results, done.stdout
+
+
+def _json(results: Path, name: str) -> dict:
+    return json.loads((results / name / f"{name}.json").read_text())
+
+
+def test_smoke_trains_each_run_once_and_reuses_it(smoke):
+    results, stdout = smoke
+    # Table 2's three runs and Figure 9's; the other scripts reuse them.
+    assert stdout.count("training ") == 4, stdout
+    finished = sorted(p.name for p in (results / "runs" / "smoke").iterdir())
+    assert finished == [
+        "cartpole-v0-a2c",
+        "cartpole-v0-a2c-model",
+        "cartpole-v0-ldn",
+        "cartpole-v0-ldn-k0.5,1,2",
+    ]
+
+
+def test_smoke_tables_2_and_3(smoke):
+    results, _ = smoke
+    table2 = _json(results, "table2")
+    assert table2["seeds"] == 2 and table2["scale"] == "smoke" and table2["machine"]["cores"]
+    assert [(r["env"], r["algo"]) for r in table2["rows"]] == [
+        ("cartpole-v0", "a2c"),
+        ("cartpole-v0", "a2c-model"),
+        ("cartpole-v0", "ldn"),
+    ]
+    for row in table2["rows"]:
+        assert row["runs"] == 2 and len(row["episodes_to_threshold"]) == 2
+        assert row["threshold"] == 150.0 and row["paper_mean"] > 0
+        assert {"min", "max", "mean", "sd", "reached"} <= set(row)
+    with open(results / "table2" / "table2.csv") as f:
+        assert len(list(csv.DictReader(f))) == 3
+    table3 = _json(results, "table3")
+    for row in table3["rows"]:
+        assert row["compile_seconds"] > 0 and row["train_seconds"] > 0
+        assert len(row["seconds_to_threshold"]) == 2 and row["paper_seconds"] > 0
+    for png in ("table2/figure6.png", "table3/table3.png", "figure4/figure4.png"):
+        assert (results / png).stat().st_size > 1000, png
+    with open(results / "figure4" / "figure4.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert {r["algo"] for r in rows} == {"a2c", "a2c-model", "ldn"}
+    assert all(float(r["low95"]) <= float(r["mean"]) <= float(r["high95"]) for r in rows)
+
+
+def test_smoke_figure5_places_every_imagined_step(smoke):
+    results, _ = smoke
+    data = _json(results, "figure5")
+    assert set(data["runs"]) == {"ldn", "a2c-model"}
+    for run in data["runs"].values():
+        total = sum(run["imagined_steps_per_seed"])
+        for axis in ("imagined_axis", "real_axis"):
+            counts = np.asarray(run[axis]["counts"])
+            assert counts.shape[1] == 10
+            assert counts.sum() == pytest.approx(total, abs=0.1)
+    assert (results / "figure5" / "figure5.png").stat().st_size > 1000
+
+
+def test_smoke_figure9_and_pending_tables(smoke):
+    results, _ = smoke
+    figure9 = _json(results, "figure9")
+    assert [r["k"] for r in figure9["rows"]] == [0.5, 1.0, 2.0]
+    assert all(len(r["episodes_to_threshold"]) == 2 for r in figure9["rows"])
+    for name, rows in (("table4", 12), ("table5", 9)):
+        table = _json(results, name)["rows"]
+        assert len(table) == rows and all(r["status"] == "pending" for r in table)
+        assert all("--scale paper only" in r["reason"] for r in table)
+
+
+def test_smoke_calibration(smoke):
+    results, _ = smoke
+    data = _json(results, "calibration")
+    assert [p["episodes"] for p in data["points"]] == [8, 16]
+    first, last = data["points"]
+    assert "match" in first["source"] and "final checkpoint" in last["source"]
+    for point in data["points"]:
+        pooled = point["pooled"]
+        for rule in ("predicted_termination", "ld_rule", "ensemble_rule"):
+            assert sum(pooled["horizons"][rule]["counts"]) == 2 * 4  # seeds x episodes
+        one_step = pooled["imagined"]["one_step_error"]
+        assert set(one_step) >= {"ld", "sigma2", "disagreement", "steps", "median"}
+        assert one_step["steps"] == pooled["imagined"]["steps"] > 0
+        assert point["ensemble"]["members"] == 2 and point["ensemble"]["fit_steps_per_member"] > 0
+        assert len(point["per_seed"]) == 2
+    assert (results / "calibration" / "calibration.png").stat().st_size > 1000
+
+
+def test_report_is_generated_from_the_result_files(smoke, tmp_path):
+    results, _ = smoke
+    text = (results / "REPORT.md").read_text()
+    for heading in ("## Table 2", "## Table 3", "## Figure 4", "## Figure 5", "## Figure 9"):
+        assert heading in text
+    assert "## LD calibration" in text and "## What reproduced and what did not" in text
+    assert "346.4 ± 44.5" in text and "625.5" in text  # the paper's numbers beside ours
+    assert "pending" in text and "cores" in text
+    # Change a result file: the report follows it. Remove one: the report says so.
+    table2 = _json(results, "table2")
+    table2["rows"][2].update(mean=123.4, sd=5.6, reached=2)
+    (tmp_path / "table2").mkdir()
+    (tmp_path / "table2" / "table2.json").write_text(json.dumps(table2))
+    text = report.render(tmp_path, report.common.SCALES["smoke"])
+    assert "123.4 ± 5.6" in text
+    assert "Not produced yet (run `figure9.py`)" in text
