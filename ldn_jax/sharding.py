@@ -65,14 +65,30 @@ def shard_seeds(fn: Callable, mesh: Mesh) -> Callable:
 
 
 def place(batch, mesh: Mesh):
-    """Put a `[K, S, ...]` pytree on the mesh (multi-host: every process passes the same
-    full value and keeps its own block)."""
-    return jax.device_put(batch, batch_sharding(mesh))
+    """Put a `[K, S, ...]` pytree on the mesh. Across hosts every process passes the same
+    full value (the state is initialised the same everywhere) and keeps its own block."""
+    return _put(batch, batch_sharding(mesh))
 
 
 def replicate(value, mesh: Mesh):
     """Give every device of the mesh the whole of `value` (K values, a key)."""
-    return jax.device_put(value, NamedSharding(mesh, P()))
+    return _put(value, NamedSharding(mesh, P()))
+
+
+def _put(tree, sharding: NamedSharding):
+    # Built from host copies rather than `jax.device_put`, whose multi-host check that every
+    # process passes the same value fails on NaN (the moving return starts as NaN). Arrays
+    # that already span hosts (restored by orbax) are only resharded.
+    def put(x):
+        if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key):
+            data = put(jax.random.key_data(x))
+            return jax.random.wrap_key_data(data, impl=jax.random.key_impl(x))
+        if isinstance(x, jax.Array) and not x.is_fully_addressable:  # already global
+            return jax.device_put(x, sharding)
+        host = np.asarray(x)
+        return jax.make_array_from_callback(host.shape, sharding, lambda index: host[index])
+
+    return jax.tree.map(put, tree)
 
 
 def abstract(batch, mesh: Mesh | None):
