@@ -505,7 +505,6 @@ def dry_run(config: Config, mesh=None, cache: Path | None = None) -> dict:
         "output_bytes": memory.output_size_in_bytes,
         "alias_bytes": memory.alias_size_in_bytes,
         "temp_bytes": memory.temp_size_in_bytes,
-        "code_bytes": memory.generated_code_size_in_bytes,
     }
     devices = 1 if mesh is None else mesh.size
     mb = lambda n: f"{n / 2**20:,.1f} MB"
@@ -514,11 +513,11 @@ def dry_run(config: Config, mesh=None, cache: Path | None = None) -> dict:
         f"{devices} device(s), {config.chunk_iterations} iterations per chunk; nothing written\n"
         f"compile: {report['compile_seconds']:.2f} s (trace and lower {lower_s:.2f} s, XLA "
         f"{compile_s:.2f} s; cache: {cache or 'off'})\n"
-        f"cost per chunk, XLA's static count (a loop of unknown length counted once): "
+        f"cost per chunk, XLA's static count (each loop body once, whatever its trip count): "
         f"{report['flops']:.3g} FLOPs, {report['bytes_accessed']:.3g} bytes accessed\n"
-        f"memory per device: arguments {mb(report['argument_bytes'])} (donated, aliased "
+        f"memory per device: arguments {mb(report['argument_bytes'])} (donated: aliased "
         f"{mb(report['alias_bytes'])}), outputs {mb(report['output_bytes'])}, temporaries "
-        f"{mb(report['temp_bytes'])}, code {mb(report['code_bytes'])}"
+        f"{mb(report['temp_bytes'])}"
     )
     return report
 
