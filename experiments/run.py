@@ -594,9 +594,11 @@ def train(
                 )
                 last = chunk + 1 == chunks
                 due = checkpoint_every and (chunk + 1) % checkpoint_every == 0
-                if not last and (due or stop.requested(chunk + 1)):
+                # Across hosts all stop together: the checkpoint is a collective save.
+                stopping = not last and sharding.any_process(stop.requested(chunk + 1))
+                if not last and (due or stopping):
                     save_checkpoint(out, f"chunk_{chunk + 1:05d}", states, history, session)
-                if not last and stop.requested(chunk + 1):
+                if stopping:
                     progress.stop()
                     logger.close()
                     raise Interrupted(stop.signum or signal.SIGINT, chunk + 1, chunks)
