@@ -30,7 +30,7 @@ format: $(STAMP)
 	$(VENV)/bin/ruff format .
 
 bench: $(STAMP)
-	$(PY) bench/bench.py
+	$(PY) bench/bench.py $(BENCH_ARGS)
 
 # The paper's CartPole results into experiments/results/ (REPORT.md there); SCALE=paper for the
 # larger budget. Training runs are kept in experiments/results/runs/ and reused.

@@ -1,8 +1,12 @@
-"""`make bench`: throughput figures, printed as one JSON line.
+"""`make bench`: throughput, compile cost, memory and seed scaling, as one JSON document
+(printed, and written to --out).
 
-Each section measures a compiled program twice: the first call's wall time minus the
+Each env section measures a compiled program twice: the first call's wall time minus the
 second's is reported as compile seconds; the second call is the throughput measurement.
-Every loop consumes what it computes, so XLA cannot delete the work being timed.
+Every loop consumes what it computes, so XLA cannot delete the work being timed. Training
+sections compile ahead of time and report compile and train seconds apart. This process
+uses no persistent compilation cache, so its compile seconds are cold ones; the `compile`
+section measures the cache in fresh processes.
 """
 
 from __future__ import annotations
@@ -11,17 +15,25 @@ import argparse
 import json
 import os
 import platform
+import resource
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 
-import envs
-from ldn_jax.config import from_preset
-from ldn_jax.train import Trainer
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import envs  # noqa: E402
+from experiments.run import compile_chunk, enable_compile_cache  # noqa: E402
+from ldn_jax.config import from_preset  # noqa: E402
+from ldn_jax.train import Trainer  # noqa: E402
+
+SECTIONS = ("env", "train", "rejax", "compile", "scaling", "mujoco")
 
 
 def _timed(fn, *args):
@@ -125,12 +137,115 @@ def training(
     }
 
 
+def seed_scaling(batches, episodes: int = 80) -> dict:
+    """ldn on cartpole-v1 for a short fixed budget at several vmapped batch sizes.
+
+    `batches` holds (seeds, number of K values). Wall seconds per chunk show how the cost
+    of one compiled program grows with the batch it is vmapped over.
+    """
+    rows = []
+    for seeds, n_k in batches:
+        config = from_preset(
+            "paper",
+            env="cartpole-v1",
+            algo="ldn",
+            seeds=seeds,
+            k=(0.5, 1.0, 2.0)[:n_k] if n_k > 1 else (1.0,),
+            episodes=episodes,
+            workers=8,
+            chunk_iterations=5,
+        )
+        trainer = Trainer(config)
+        states, k = trainer.init_batch(), trainer.k_values()
+        compiled, lower_s, compile_s = compile_chunk(trainer, states, k)
+        chunk_s = []
+        for _ in range(config.iterations // config.chunk_iterations):
+            start = time.perf_counter()
+            states, _ = jax.block_until_ready(compiled(states, k))
+            chunk_s.append(round(time.perf_counter() - start, 3))
+        memory = compiled.memory_analysis()
+        env_steps = int(states.env_steps.sum())
+        rows.append(
+            {
+                "seeds": seeds,
+                "k_values": n_k,
+                "runs": seeds * n_k,
+                "compile_s": round(lower_s + compile_s, 2),
+                "chunk_s": chunk_s,
+                "train_s": round(sum(chunk_s), 3),
+                "train_s_per_run": round(sum(chunk_s) / (seeds * n_k), 4),
+                "env_steps": env_steps,
+                "env_steps_per_s": round(env_steps / sum(chunk_s)),
+                "argument_mb": round(memory.argument_size_in_bytes / 2**20, 1),
+                "temp_mb": round(memory.temp_size_in_bytes / 2**20, 1),
+            }
+        )
+    result: dict = {"env": "cartpole-v1", "algo": "ldn", "episodes": episodes, "rows": rows}
+    by_shape = {(row["seeds"], row["k_values"]): row for row in rows}
+    if (10, 3) in by_shape and (1, 1) in by_shape:
+        result["train_s_10x3_over_1x1"] = round(
+            by_shape[10, 3]["train_s"] / by_shape[1, 1]["train_s"], 2
+        )
+    return result
+
+
+def compile_cold_warm(seeds: int, n_k: int) -> dict:
+    """The same training program compiled in two fresh processes sharing an empty persistent
+    cache: the first compiles (cold), the second loads it (warm)."""
+    runs = {}
+    with tempfile.TemporaryDirectory() as cache:
+        command = [sys.executable, __file__, "--probe", cache, "--probe-shape", f"{seeds}x{n_k}"]
+        for name in ("cold", "warm"):
+            start = time.perf_counter()
+            done = subprocess.run(command, capture_output=True, text=True, check=True)
+            runs[name] = json.loads(done.stdout.strip().splitlines()[-1])
+            runs[name]["process_s"] = round(time.perf_counter() - start, 2)
+    return {
+        "program": f"ldn cartpole-v1 chunk, {seeds} seeds x {n_k} K",
+        **runs,
+        "warm_over_cold_compile": round(runs["warm"]["compile_s"] / runs["cold"]["compile_s"], 3),
+    }
+
+
+def _probe(cache: str, shape: str) -> None:
+    """Inside a fresh process: what a training run pays before its first chunk."""
+    start = time.perf_counter()
+    enable_compile_cache(cache)
+    seeds, n_k = (int(v) for v in shape.split("x"))
+    k = (0.5, 1.0, 2.0)[:n_k] if n_k > 1 else (1.0,)
+    config = from_preset("paper", env="cartpole-v1", algo="ldn", seeds=seeds, k=k, episodes=80)
+    trainer = Trainer(config)
+    states = jax.block_until_ready(trainer.init_batch())
+    init_s = time.perf_counter() - start
+    compiled, lower_s, compile_s = compile_chunk(trainer, states, trainer.k_values())
+    memory = compiled.memory_analysis()
+    row = {
+        "init_s": round(init_s, 2),
+        "lower_s": round(lower_s, 2),
+        "xla_compile_s": round(compile_s, 2),
+        "compile_s": round(lower_s + compile_s, 2),
+        "peak_rss_mb": round(_peak_rss_mb()),
+        "program_argument_mb": round(memory.argument_size_in_bytes / 2**20, 1),
+        "program_output_mb": round(memory.output_size_in_bytes / 2**20, 1),
+        "program_temp_mb": round(memory.temp_size_in_bytes / 2**20, 1),
+    }
+    print(json.dumps(row))
+
+
+def _peak_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # KiB on Linux
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--sections", help=f"comma list of {', '.join(SECTIONS)} (default all)")
     parser.add_argument(
-        "--sections",
-        default="env,train,rejax,mujoco",
-        help="comma list: env, train, rejax, mujoco",
+        "--quick",
+        action="store_true",
+        help="smaller sizes (a few minutes); without rejax unless --sections names it",
+    )
+    parser.add_argument(
+        "--out", default=str(ROOT / "bench" / "results.json"), help="also write the JSON here"
     )
     parser.add_argument(
         "--anchor-python",
@@ -139,29 +254,46 @@ def main() -> None:
         ),
         help="python of the anchors' venv (shared/anchors/README.md), for side-by-side rows",
     )
+    parser.add_argument("--probe", metavar="CACHE", help=argparse.SUPPRESS)
+    parser.add_argument("--probe-shape", default="10x3", help=argparse.SUPPRESS)
     args = parser.parse_args()
-    sections = set(args.sections.split(","))
+    if args.probe:
+        _probe(args.probe, args.probe_shape)
+        return
+    default = [s for s in SECTIONS if s not in ("rejax", "mujoco")] if args.quick else SECTIONS
+    sections = set(args.sections.split(",") if args.sections else default)
     result: dict = {
         "jax": jax.__version__,
         "backend": jax.default_backend(),
+        "devices": jax.device_count(),
+        "cpus": os.cpu_count(),
         "machine": platform.machine(),
+        "quick": args.quick,
     }
     if "env" in sections:
         result["cartpole_env"] = [
             cartpole_env_steps(n, auto_reset)
             for auto_reset in (False, True)
-            for n in (1, 64, 1024, 8192)
+            for n in ((1, 1024) if args.quick else (1, 64, 1024, 8192))
         ]
     if "train" in sections:
-        result["training"] = [
-            training(algo) for algo in ("a2c", "a2c-model", "ldn", "ppo", "ppo-model", "ppo-ldn")
-        ]
+        algos = ("a2c", "a2c-model", "ldn", "ppo", "ppo-model", "ppo-ldn")
+        size = dict(seeds=2, episodes=160) if args.quick else {}
+        result["training"] = [training(algo, **size) for algo in algos]
         _add_overheads(result["training"])
     if "mujoco" in sections:
         result["mujoco"] = mujoco_section()
     if "rejax" in sections:
         result["ppo_vs_rejax"] = ppo_vs_rejax(args.anchor_python)
-    print(json.dumps(result))
+    if "compile" in sections:
+        result["compile_cache"] = compile_cold_warm(*((1, 1) if args.quick else (10, 3)))
+    if "scaling" in sections:
+        batches = [(1, 1), (10, 1), (10, 3)] + ([] if args.quick else [(100, 1)])
+        result["seed_scaling"] = seed_scaling(batches)
+    result["peak_rss_mb"] = round(_peak_rss_mb())
+    text = json.dumps(result, indent=1)
+    print(text)
+    Path(args.out).write_text(text + "\n")
 
 
 def mujoco_section() -> dict:

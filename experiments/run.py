@@ -3,6 +3,8 @@
     python experiments/run.py --env cartpole-v2 --algo ldn --seeds 5 --k 0.5,1,2
 
 Writes config.json, metrics.jsonl, summary.json, curves.png and checkpoints/ into --out.
+`--devices N` splits the seeds over N devices, `--distributed` over several hosts;
+`--dry-run` compiles the training program and prints its cost without training.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import envs
 from experiments.loggers import LOGGERS, Logger, NullLogger, make_logger
 from experiments.plots import learning_curves
-from ldn_jax import checkpoint
+from ldn_jax import checkpoint, sharding
 from ldn_jax.config import (
     ALGORITHMS,
     BACKENDS,
@@ -87,10 +89,93 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     p.add_argument("--quiet", action="store_true", help="no live progress display")
     p.add_argument("--logger", default="none", choices=LOGGERS, help="extra metric sink")
+    p.add_argument(
+        "--devices",
+        help="devices to split the seeds over: N or 'all' (default 1; with --distributed, all)",
+    )
+    p.add_argument(
+        "--distributed",
+        action="store_true",
+        help="multi-host: jax.distributed.initialize (coordinator from the flags below, "
+        "JAX_COORDINATOR_ADDRESS, or the cluster: SLURM, Open MPI); process 0 writes the files",
+    )
+    p.add_argument("--coordinator", metavar="HOST:PORT", help="process 0's address")
+    p.add_argument("--num-processes", type=int, help="processes in all (one per host)")
+    p.add_argument("--process-id", type=int, help="this process's index, 0..num-processes-1")
+    p.add_argument(
+        "--compile-cache",
+        metavar="DIR",
+        help=f"persistent compilation cache, or 'none' (default {default_compile_cache()})",
+    )
+    p.add_argument(
+        "--dry-run",
+        action="store_true",
+        help="compile the training chunk, print compile seconds, FLOPs and memory, write nothing",
+    )
     args = p.parse_args(argv)
     if args.checkpoint_every < 0:
         raise UsageError("--checkpoint-every must be >= 0")
+    cluster = [f for f in ("coordinator", "num_processes", "process_id") if getattr(args, f)]
+    if cluster and not args.distributed:
+        raise UsageError(f"--{cluster[0].replace('_', '-')} needs --distributed")
+    if args.distributed and not (args.out or args.resume or args.dry_run):
+        raise UsageError("--distributed needs --out (every process must name the same run)")
     return args
+
+
+def default_compile_cache() -> Path:
+    """Per user: $XDG_CACHE_HOME/ldn-jax/jax-cache, else ~/.cache/ldn-jax/jax-cache."""
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "ldn-jax" / "jax-cache"
+
+
+def enable_compile_cache(spec: str | None) -> Path | None:
+    """Turn on JAX's persistent compilation cache in `spec` (None: the default directory;
+    "none": off). A later process that compiles the same program loads it from there."""
+    if spec == "none":
+        return None
+    path = Path(spec).expanduser() if spec else default_compile_cache()
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise UsageError(f"cannot use --compile-cache {path}: {error.strerror or error}") from None
+    jax.config.update("jax_compilation_cache_dir", str(path))
+    # The defaults skip programs that compile in under a second and small entries; on CPU
+    # the many small programs (eager init ops) add up to seconds, so cache everything.
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
+    return path
+
+
+def _initialize_distributed(args: argparse.Namespace) -> None:
+    try:
+        sharding.initialize_distributed(args.coordinator, args.num_processes, args.process_id)
+    except (RuntimeError, ValueError) as error:
+        reason = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
+        raise UsageError(f"--distributed: {reason}") from None
+
+
+def device_mesh(args: argparse.Namespace, seeds: int):
+    """The mesh that `--devices` asks for, or None for one device (no sharding)."""
+    spec = args.devices or ("all" if args.distributed else "1")
+    if spec == "all":
+        count = None
+    else:
+        try:
+            count = int(spec)
+        except ValueError:
+            raise UsageError(f"--devices must be a number or 'all', got {spec!r}") from None
+    if count == 1:
+        return None
+    try:
+        mesh = sharding.seed_mesh(count)
+        if args.distributed and mesh.size != jax.device_count():
+            everyone = jax.device_count()
+            raise ValueError(f"--distributed uses every device ({everyone}); drop --devices")
+        sharding.check_divisible(seeds, mesh)
+    except ValueError as error:
+        raise UsageError(str(error)) from None
+    return mesh if mesh.size > 1 else None
 
 
 CONFIG_FLAGS = {
@@ -323,9 +408,13 @@ def checkpoint_paths(out: Path, name: str) -> tuple[Path, Path]:
 
 def save_checkpoint(out: Path, name: str, states, history: dict, session: dict) -> None:
     """The training state (orbax, atomic), then the host file (atomic): a checkpoint counts
-    only once its host file exists, so a kill between the two loses nothing but time."""
+    only once its host file exists, so a kill between the two loses nothing but time.
+
+    Across hosts every process saves its seeds with orbax; process 0 writes the rest."""
     state_dir, host_file = checkpoint_paths(out, name)
     checkpoint.save(state_dir, states)
+    if jax.process_index() != 0:
+        return
     buffer = io.BytesIO()
     arrays = {f"history/{n}": np.concatenate(v, axis=2) for n, v in history.items() if v}
     manifest = json.dumps(_manifest(state_dir))
@@ -407,6 +496,54 @@ def truncate_metrics(path: Path, iterations: int) -> None:
     write_atomic(path, "".join(f"{line}\n" for line in kept).encode())
 
 
+def compile_chunk(trainer: Trainer, states, k, mesh=None) -> tuple[object, float, float]:
+    """`(compiled chunk, lower seconds, compile seconds)`; `states` may be abstract.
+
+    Lowering (tracing) always runs; XLA's compile is what the persistent cache skips.
+    """
+    start = time.perf_counter()
+    lowered = trainer.batched_chunk(mesh).lower(states, k)
+    lowered_at = time.perf_counter()
+    compiled = lowered.compile()
+    return compiled, lowered_at - start, time.perf_counter() - lowered_at
+
+
+def dry_run(config: Config, mesh=None, cache: Path | None = None) -> dict:
+    """Compile the chunk program without computing anything and print what it costs."""
+    trainer = Trainer(config)
+    states = sharding.abstract(jax.eval_shape(trainer.init_batch), mesh)
+    k = trainer.k_values() if mesh is None else sharding.replicate(trainer.k_values(), mesh)
+    compiled, lower_s, compile_s = compile_chunk(trainer, states, k, mesh)
+    cost = compiled.cost_analysis()
+    cost = (cost[0] if isinstance(cost, list | tuple) else cost) or {}
+    memory = compiled.memory_analysis()
+    report = {
+        "compile_seconds": round(lower_s + compile_s, 3),
+        "lower_seconds": round(lower_s, 3),
+        "xla_compile_seconds": round(compile_s, 3),
+        "flops": float(cost.get("flops", float("nan"))),
+        "bytes_accessed": float(cost.get("bytes accessed", float("nan"))),
+        "argument_bytes": memory.argument_size_in_bytes,
+        "output_bytes": memory.output_size_in_bytes,
+        "alias_bytes": memory.alias_size_in_bytes,
+        "temp_bytes": memory.temp_size_in_bytes,
+    }
+    devices = 1 if mesh is None else mesh.size
+    mb = lambda n: f"{n / 2**20:,.1f} MB"
+    print(
+        f"dry run: {config.env} {config.algo}, {config.seeds} seeds x {len(config.k)} K on "
+        f"{devices} device(s), {config.chunk_iterations} iterations per chunk; nothing written\n"
+        f"compile: {report['compile_seconds']:.2f} s (trace and lower {lower_s:.2f} s, XLA "
+        f"{compile_s:.2f} s; cache: {cache or 'off'})\n"
+        f"cost per chunk, XLA's static count (each loop body once, whatever its trip count): "
+        f"{report['flops']:.3g} FLOPs, {report['bytes_accessed']:.3g} bytes accessed\n"
+        f"memory per device: arguments {mb(report['argument_bytes'])} (donated: aliased "
+        f"{mb(report['alias_bytes'])}), outputs {mb(report['output_bytes'])}, temporaries "
+        f"{mb(report['temp_bytes'])}"
+    )
+    return report
+
+
 def train(
     config: Config,
     out: Path,
@@ -415,46 +552,54 @@ def train(
     stop: Stop | None = None,
     resume: bool = False,
     logger: Logger | None = None,
+    mesh=None,
 ) -> dict:
     """Train (or, with `resume`, continue) the run in `out`; returns the summary.
 
-    Raises `Interrupted` after checkpointing when `stop` asks for it between chunks.
+    With a mesh (`ldn_jax.sharding.seed_mesh`) the seeds are split over its devices; across
+    hosts only process 0 writes files. Raises `Interrupted` after checkpointing when `stop`
+    asks for it between chunks.
     """
     stop = stop or Stop()
     logger = logger or NullLogger()
+    writer = jax.process_index() == 0
     trainer = Trainer(config)
     like = jax.eval_shape(trainer.init_batch)
     chunks = config.iterations // config.chunk_iterations
     history: dict[str, list[np.ndarray]] = {}
     session = {"chunks_done": 0, "chunk_ends": [], "compile_seconds": None, "resumes": 0}
-    if resume:
+    if resume and writer:
         _remove_partial_checkpoints(out)
     found = latest_checkpoint(out) if resume else None
     if found is not None:
         states, history, session = load_checkpoint(out, found, like)
         session["resumes"] += 1
     else:
-        write_json(out / "config.json", {"run_format": RUN_FORMAT, **config.to_dict()})
+        if writer:
+            write_json(out / "config.json", {"run_format": RUN_FORMAT, **config.to_dict()})
         states = trainer.init_batch()
-    truncate_metrics(out / "metrics.jsonl", session["chunks_done"] * config.chunk_iterations)
+    if writer:
+        truncate_metrics(out / "metrics.jsonl", session["chunks_done"] * config.chunk_iterations)
     reported = _report_failures(config, history, set())
     k = trainer.k_values()
+    if mesh is not None:
+        states, k = sharding.place(states, mesh), sharding.replicate(k, mesh)
 
     if session["chunks_done"] < chunks:
-        progress = Progress(config.iterations * config.workers, quiet)
+        progress = Progress(config.iterations * config.workers, quiet or not writer)
         progress.update(
             session["chunks_done"] * config.chunk_iterations * config.workers, "compiling..."
         )
-        start = time.perf_counter()
-        chunk_fn = trainer.batched_chunk().lower(states, k).compile()
+        chunk_fn, lower_s, compile_s = compile_chunk(trainer, states, k, mesh)
         if session["compile_seconds"] is None:
-            session["compile_seconds"] = time.perf_counter() - start
+            session["compile_seconds"] = lower_s + compile_s
         train_seconds = session["chunk_ends"][-1] if session["chunk_ends"] else 0.0
-        with open(out / "metrics.jsonl", "a") as log:
+        # Processes other than 0 compute their seeds and write nothing.
+        with open(out / "metrics.jsonl" if writer else os.devnull, "a") as log:
             for chunk in range(session["chunks_done"], chunks):
                 t0 = time.perf_counter()
                 states, metrics = chunk_fn(states, k)
-                metrics = jax.device_get(metrics)
+                metrics = sharding.to_host(metrics)
                 train_seconds += time.perf_counter() - t0
                 session["chunk_ends"].append(train_seconds)
                 session["chunks_done"] = chunk + 1
@@ -471,9 +616,11 @@ def train(
                 )
                 last = chunk + 1 == chunks
                 due = checkpoint_every and (chunk + 1) % checkpoint_every == 0
-                if not last and (due or stop.requested(chunk + 1)):
+                # Across hosts all stop together: the checkpoint is a collective save.
+                stopping = not last and sharding.any_process(stop.requested(chunk + 1))
+                if not last and (due or stopping):
                     save_checkpoint(out, f"chunk_{chunk + 1:05d}", states, history, session)
-                if not last and stop.requested(chunk + 1):
+                if stopping:
                     progress.stop()
                     logger.close()
                     raise Interrupted(stop.signum or signal.SIGINT, chunk + 1, chunks)
@@ -481,13 +628,16 @@ def train(
         logger.close()
         save_checkpoint(out, FINAL_CHECKPOINT, states, history, session)
 
-    eval_returns = jax.device_get(
-        trainer.batched_evaluate()(states, jax.random.key(config.seeds + 10_000))
-    )
+    eval_key = jax.random.key(config.seeds + 10_000)
+    if mesh is not None:
+        eval_key = sharding.replicate(eval_key, mesh)
+    eval_returns = sharding.to_host(trainer.batched_evaluate(mesh)(states, eval_key))
     history = {name: np.concatenate(parts, axis=2) for name, parts in history.items()}
     summary = summarize(config, history, eval_returns, states, session)
-    write_json(out / "summary.json", summary)
-    plot(config, history, out / "curves.png")
+    summary["devices"] = 1 if mesh is None else mesh.size
+    if writer:
+        write_json(out / "summary.json", summary)
+        plot(config, history, out / "curves.png")
     return summary
 
 
@@ -520,8 +670,7 @@ def summarize(config, history, eval_returns, states, session) -> dict:
     threshold = config.resolved_threshold
     chunk_ends = session["chunk_ends"]
     train_seconds = chunk_ends[-1]
-    failure = np.asarray(states.failure)
-    failed_iteration = np.asarray(states.failed_iteration)
+    failure, failed_iteration = sharding.to_host((states.failure, states.failed_iteration))
     total_steps = int(history["env_steps"][..., -1].sum())
     runs = []
     per_chunk = config.chunk_iterations
@@ -586,15 +735,24 @@ def plot(config: Config, history: dict, path: Path) -> None:
 def main(argv: list[str] | None = None) -> int:
     try:
         args = parse_args(argv)
+        if args.distributed:
+            _initialize_distributed(args)
+        cache = enable_compile_cache(args.compile_cache)
         if args.resume:
             out = Path(args.resume)
             config = read_run_config(out)
             check_resume_flags(args, config)
         else:
             config = build_config(args)
-            out = prepare_out(args, config)
+        mesh = device_mesh(args, config.seeds)
+        if args.dry_run:
+            dry_run(config, mesh, cache)
+            return 0
+        writer = jax.process_index() == 0
+        if not args.resume:
+            out = prepare_out(args, config) if writer else Path(args.out)
         try:
-            logger = make_logger(args.logger, out)
+            logger = make_logger(args.logger, out) if writer else NullLogger()
         except ValueError as error:
             raise UsageError(str(error)) from None
         summary = train(
@@ -605,6 +763,7 @@ def main(argv: list[str] | None = None) -> int:
             Stop().install(),
             bool(args.resume),
             logger,
+            mesh,
         )
     except UsageError as error:
         print(f"error: {error}", file=sys.stderr)
@@ -617,6 +776,8 @@ def main(argv: list[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 128 + stopped.signum
+    if not writer:
+        return 0
     reached = [r for r in summary["runs"] if r["episodes_to_threshold"] is not None]
     print(
         f"{config.env} {config.algo}: {len(reached)}/{len(summary['runs'])} runs reached "

@@ -13,6 +13,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 from flax import struct
+from jax.sharding import Mesh
 
 import envs
 from ldn_jax.buffer import Buffer, Transitions, buffer_add, buffer_init
@@ -23,6 +24,7 @@ from ldn_jax.learners import LEARNERS
 from ldn_jax.learners.base import LearnerState
 from ldn_jax.learning_degree import ld_histogram
 from ldn_jax.rollout import Episodes, play_episodes
+from ldn_jax.sharding import shard_seeds
 
 Array = jax.Array
 
@@ -309,12 +311,18 @@ class Trainer:
     def k_values(self) -> Array:
         return jnp.asarray(self.config.k, jnp.float32)
 
-    def batched_chunk(self):
-        """`(states [K, S], k [K]) -> (states, metrics [K, S, N, ...])`, jitted."""
-        per_seed = jax.vmap(self.train_chunk, in_axes=(0, None))
-        return jax.jit(jax.vmap(per_seed, in_axes=(0, 0)), donate_argnums=0)
+    def batched_chunk(self, mesh: Mesh | None = None):
+        """`(states [K, S], k [K]) -> (states, metrics [K, S, N, ...])`, jitted.
 
-    def batched_evaluate(self):
-        """`(states [K, S], key) -> eval returns [K, S]`, jitted."""
+        With a mesh, each of its devices runs its block of seeds (`ldn_jax.sharding`);
+        states must then be placed with `sharding.place` and k with `sharding.replicate`.
+        """
+        per_seed = jax.vmap(self.train_chunk, in_axes=(0, None))
+        chunk = jax.vmap(per_seed, in_axes=(0, 0))
+        return jax.jit(chunk if mesh is None else shard_seeds(chunk, mesh), donate_argnums=0)
+
+    def batched_evaluate(self, mesh: Mesh | None = None):
+        """`(states [K, S], key) -> eval returns [K, S]`, jitted (seeds split as above)."""
         per_seed = jax.vmap(self.evaluate, in_axes=(0, None))
-        return jax.jit(jax.vmap(per_seed, in_axes=(0, None)))
+        evaluate = jax.vmap(per_seed, in_axes=(0, None))
+        return jax.jit(evaluate if mesh is None else shard_seeds(evaluate, mesh))
