@@ -102,14 +102,21 @@ def _json(results: Path, name: str) -> dict:
 
 def test_smoke_trains_each_run_once_and_reuses_it(smoke):
     results, stdout = smoke
-    # Table 2's three runs and Figure 9's; the other scripts reuse them.
-    assert stdout.count("training ") == 4, stdout
+    # Table 2's three runs, Figure 9's two (CartPole and inverted_pendulum), Table 4's two
+    # and Table 5's three; the other scripts reuse them.
+    assert stdout.count("training ") == 10, stdout
     finished = sorted(p.name for p in (results / "runs" / "smoke").iterdir())
     assert finished == [
         "cartpole-v0-a2c",
         "cartpole-v0-a2c-model",
         "cartpole-v0-ldn",
         "cartpole-v0-ldn-k0.5,1,2",
+        "inverted_pendulum-a2c-model",
+        "inverted_pendulum-ldn",
+        "inverted_pendulum-ldn-k0.5,1,2",
+        "inverted_pendulum-ppo",
+        "inverted_pendulum-ppo-ldn",
+        "inverted_pendulum-ppo-model",
     ]
 
 
@@ -153,15 +160,60 @@ def test_smoke_figure5_places_every_imagined_step(smoke):
     assert (results / "figure5" / "figure5.png").stat().st_size > 1000
 
 
-def test_smoke_figure9_and_pending_tables(smoke):
+def test_smoke_figure9_has_a_panel_per_env(smoke):
     results, _ = smoke
     figure9 = _json(results, "figure9")
-    assert [r["k"] for r in figure9["rows"]] == [0.5, 1.0, 2.0]
-    assert all(len(r["episodes_to_threshold"]) == 2 for r in figure9["rows"])
-    for name, rows in (("table4", 12), ("table5", 9)):
-        table = _json(results, name)["rows"]
-        assert len(table) == rows and all(r["status"] == "pending" for r in table)
-        assert all("--scale paper only" in r["reason"] for r in table)
+    assert [p["env"] for p in figure9["panels"]] == ["cartpole-v0", "inverted_pendulum"]
+    assert figure9["pending"] == []
+    cartpole, pendulum = figure9["panels"]
+    assert cartpole["threshold"] == 150.0 and pendulum["threshold"] is None
+    for panel in figure9["panels"]:
+        assert [r["k"] for r in panel["rows"]] == [0.5, 1.0, 2.0]
+        for row in panel["rows"]:
+            assert len(row["episodes_to_threshold"]) == len(row["final_moving_returns"]) == 2
+            assert row["final_moving_return"]["runs"] == 2
+    assert all(r["reached"] == 0 for r in pendulum["rows"])  # no threshold, none reached
+    with open(results / "figure9" / "figure9.csv") as f:
+        assert len(list(csv.DictReader(f))) == 6
+    assert (results / "figure9" / "figure9.png").stat().st_size > 1000
+
+
+def test_smoke_mujoco_tables_run_inverted_pendulum_and_list_the_rest(smoke):
+    results, _ = smoke
+    table4 = _json(results, "table4")
+    assert len(table4["rows"]) == 12 and table4["seeds"] == 2
+    for row in table4["rows"]:
+        if row["env"] == "inverted_pendulum":
+            assert row["status"] == "done" and row["episodes"] == 8 and row["runs"] == 2
+            assert len(row["final_moving_returns"]) == 2 and row["env_steps_per_seed"] > 0
+            assert row["paper"] in (7842.1, 10864.3)
+        else:
+            assert row["status"] == "pending" and "--scale paper only" in row["reason"]
+    table5 = _json(results, "table5")
+    done = [r for r in table5["rows"] if r["status"] == "done"]
+    assert [r["algo"] for r in done] == ["ppo", "ppo-model", "ppo-ldn"]
+    assert len(table5["rows"]) == 9
+    # The top is 90% of the best moving return of any run, so some run reaches it.
+    assert len({r["top"] for r in done}) == 1 and any(r["reached"] for r in done)
+    for row in done:
+        assert len(row["episodes_to_top"]) == 2 and row["paper"] in (2463, 2465, 2175)
+    for name in ("table4", "table5"):
+        assert (results / name / f"{name}.png").stat().st_size > 1000
+        with open(results / name / f"{name}.csv") as f:
+            assert len(list(csv.DictReader(f))) == len(_json(results, name)["rows"])
+
+
+def test_episodes_to_the_top_reads_the_per_episode_moving_return():
+    from experiments.paper import table5
+
+    # One seed, two iterations of two workers; the moving return after each episode.
+    history = {
+        "moving_after": np.array([[[[1.0, 5.0], [9.0, 12.0]]]]),
+        "lengths": np.array([[[[3, 4], [10, 20]]]]),
+        "env_steps": np.array([[[7, 37]]]),
+    }
+    assert table5.episodes_to(history, 9.0) == [3]  # the first episode of iteration 2
+    assert table5.episodes_to(history, 12.5) == [None]
 
 
 def test_smoke_calibration(smoke):
@@ -188,8 +240,12 @@ def test_report_is_generated_from_the_result_files(smoke, tmp_path):
     for heading in ("## Table 2", "## Table 3", "## Figure 4", "## Figure 5", "## Figure 9"):
         assert heading in text
     assert "## LD calibration" in text and "## What reproduced and what did not" in text
+    assert "## Table 4: MuJoCo" in text and "## Table 5: MuJoCo" in text
     assert "346.4 ± 44.5" in text and "625.5" in text  # the paper's numbers beside ours
-    assert "pending" in text and "cores" in text
+    assert "10,864.3" in text and "2,175" in text  # Tables 4 and 5 of the paper
+    assert "Figure 9, inverted_pendulum: mean final moving return" in text
+    assert "Table 5, inverted_pendulum: " in text
+    assert "Pending at this scale" in text and "cores" in text
     # Change a result file: the report follows it. Remove one: the report says so.
     table2 = _json(results, "table2")
     table2["rows"][2].update(mean=123.4, sd=5.6, reached=2)

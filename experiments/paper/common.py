@@ -18,7 +18,7 @@ import platform
 import shutil
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +28,7 @@ if str(ROOT) not in sys.path:  # run as `python experiments/paper/NAME.py`
     sys.path.insert(0, str(ROOT))
 
 from experiments.run import RUN_FORMAT, train  # noqa: E402
-from ldn_jax.config import Config, from_preset, validate  # noqa: E402
+from ldn_jax.config import DEFAULT_CHUNK, Config, from_preset, validate  # noqa: E402
 
 RESULTS = ROOT / "experiments" / "results"
 
@@ -55,19 +55,79 @@ class Scale:
     """Imagined episodes per seed in each calibration analysis."""
     ensemble_members: int
     """E: models of the ensemble-disagreement learning degree in the calibration study."""
+    mujoco_seeds: int = 0
+    """Seeds per MuJoCo run (Tables 4 and 5, Figure 9's MuJoCo panels)."""
+    mujoco_episodes: dict[str, int] = field(default_factory=dict)
+    """Real episodes per seed for each MuJoCo task this scale runs; the tasks left out are
+    reported as pending."""
+    ablation_envs: tuple[str, ...] = ()
+    """Figure 9's panels besides `ld_env` (the K ablation on MuJoCo tasks)."""
 
 
 CARTPOLE = ("cartpole-v0", "cartpole-v1", "cartpole-v2")
 
+MUJOCO = ("ant", "halfcheetah", "hopper", "reacher", "walker2d", "inverted_pendulum")
+
+MUJOCO_CPU_SEEDS = 5
+MUJOCO_CPU_EPISODES = {"inverted_pendulum": 1600, "halfcheetah": 32}
+"""The CPU scale's MuJoCo budgets, measured on these 2 cores: PPO's moving return on
+inverted_pendulum reached 700-980 (of 1,000) by 1,150 episodes, 5 seeds in about 3 minutes,
+after which an iteration plays 8 full 1,000-step episodes per seed (about 4 s). halfcheetah
+runs at about 1-3k env steps/s, so 32 episodes (4 iterations of 8 x 1,000 steps) is a short
+run that shows the pipeline, not learning."""
+
 SCALES = {
-    # Tests: a tiny budget on one CartPole version (compiling dominates), every code path.
-    "smoke": Scale("smoke", 2, 16, 4, 2, ("cartpole-v0",), "cartpole-v0", (8, 16), 4, 2),
+    # Tests: a tiny budget on one CartPole version and inverted_pendulum (compiling
+    # dominates), every code path.
+    "smoke": Scale(
+        "smoke",
+        2,
+        16,
+        4,
+        2,
+        ("cartpole-v0",),
+        "cartpole-v0",
+        (8, 16),
+        4,
+        2,
+        mujoco_seeds=2,
+        mujoco_episodes={"inverted_pendulum": 8},
+        ablation_envs=("inverted_pendulum",),
+    ),
     # The default: the paper's 10 seeds with a budget most runs cross within (episodes to
     # threshold measured on these 2 cores: a2c ~900-1300, a2c-model ~450-610, ldn ~850-1150).
-    "cpu": Scale("cpu", 10, 2000, 8, 5, CARTPOLE, "cartpole-v2", (200, 800, 2000), 32, 5),
-    # A budget every run should cross within, and larger calibration samples.
+    # MuJoCo at what 2 cores do in minutes: inverted_pendulum, and a short halfcheetah run.
+    "cpu": Scale(
+        "cpu",
+        10,
+        2000,
+        8,
+        5,
+        CARTPOLE,
+        "cartpole-v2",
+        (200, 800, 2000),
+        32,
+        5,
+        mujoco_seeds=MUJOCO_CPU_SEEDS,
+        mujoco_episodes=MUJOCO_CPU_EPISODES,
+        ablation_envs=("inverted_pendulum",),
+    ),
+    # A budget every run should cross within, larger calibration samples, and every MuJoCo
+    # task at the episodes of the paper's Table 5 and beyond (meant for a GPU).
     "paper": Scale(
-        "paper", 10, 4000, 8, 5, CARTPOLE, "cartpole-v2", (200, 800, 2000, 4000), 128, 10
+        "paper",
+        10,
+        4000,
+        8,
+        5,
+        CARTPOLE,
+        "cartpole-v2",
+        (200, 800, 2000, 4000),
+        128,
+        10,
+        mujoco_seeds=10,
+        mujoco_episodes=dict.fromkeys(MUJOCO, 4000),
+        ablation_envs=MUJOCO,
     ),
 }
 
@@ -93,7 +153,14 @@ def _compile_cache(results: Path) -> None:
 
 # -- the paper's numbers (shared/PAPER.md) -----------------------------------------------------
 
-PAPER_ALGOS = {"a2c": "A3C", "a2c-model": "A3C-Model", "ldn": "MBRL-LDN"}
+PAPER_ALGOS = {
+    "a2c": "A3C",
+    "a2c-model": "A3C-Model",
+    "ldn": "MBRL-LDN",
+    "ppo": "PPO2",
+    "ppo-model": "PPO2-Model",
+    "ppo-ldn": "PPO2-LDN",
+}
 """Our algorithm names -> the paper's (A2C is our synchronous A3C)."""
 
 PAPER_TABLE2 = {
@@ -144,22 +211,26 @@ PAPER_TABLE5 = {
 
 def run_config(scale: Scale, env: str, algo: str, k: tuple[float, ...] = (1.0,)) -> Config:
     """The paper preset at this scale. Raises ValueError for a run this scale does not do:
-    the scripts report such rows as pending. The MuJoCo rows run at the paper scale only
-    (1,000-step MJX episodes take hours on CPU at the budgets the tables need)."""
-    if env not in CARTPOLE and scale.name != "paper":
-        raise ValueError(f"{env} runs at --scale paper only (MJX on CPU is too slow here)")
-    return validate(
-        from_preset(
-            "paper",
-            env=env,
-            algo=algo,
-            k=k,
-            seeds=scale.seeds,
-            episodes=scale.episodes,
-            workers=scale.workers,
-            chunk_iterations=scale.chunk_iterations,
-        )
-    )
+    the scripts report such rows as pending (MuJoCo tasks outside `scale.mujoco_episodes`:
+    1,000-step MJX episodes take hours on CPU at the budgets the tables need).
+
+    MuJoCo runs take `scale.mujoco_seeds` and one iteration per chunk (an iteration plays up
+    to 8,000 physics steps per seed)."""
+    if env in MUJOCO:
+        if env not in scale.mujoco_episodes:
+            raise ValueError(f"{env} runs at --scale paper only (MJX on CPU is too slow here)")
+        size = {
+            "seeds": scale.mujoco_seeds,
+            "episodes": scale.mujoco_episodes[env],
+            "chunk_iterations": DEFAULT_CHUNK[env],
+        }
+    else:
+        size = {
+            "seeds": scale.seeds,
+            "episodes": scale.episodes,
+            "chunk_iterations": scale.chunk_iterations,
+        }
+    return validate(from_preset("paper", env=env, algo=algo, k=k, workers=scale.workers, **size))
 
 
 def run_dir(results: Path, scale: Scale, config: Config) -> Path:
@@ -173,9 +244,8 @@ def ensure_run(config: Config, out: Path) -> dict:
     """The summary of the run of `config` in `out`: reused if finished, resumed if it was
     interrupted, trained from scratch otherwise (a run of another config there is replaced)."""
     stored = out / "config.json"
-    wanted = json.loads(json.dumps({"run_format": RUN_FORMAT, **config.to_dict()}))
     if stored.exists():
-        if json.loads(stored.read_text()) == wanted:
+        if _same_config(json.loads(stored.read_text()), config):
             if (out / "summary.json").exists() and (out / "checkpoints" / "final").is_dir():
                 return json.loads((out / "summary.json").read_text())
             print(f"resuming {out}", flush=True)
@@ -189,6 +259,18 @@ def ensure_run(config: Config, out: Path) -> dict:
         flush=True,
     )
     return summary
+
+
+def _same_config(stored: dict, config: Config) -> bool:
+    """Whether a run directory's config.json is `config`: the same run format and the same
+    settings once read back, so that a setting added later with its default still matches."""
+    if stored.get("run_format") != RUN_FORMAT:
+        return False
+    try:
+        plain = lambda c: json.loads(json.dumps(c.to_dict()))
+        return plain(Config.from_dict(stored)) == plain(config)
+    except TypeError:  # a field this version does not know
+        return False
 
 
 def collect_runs(
@@ -226,6 +308,52 @@ def load_history(out: Path) -> dict[str, np.ndarray]:
     """The run's per-iteration metrics `{name: [K, S, N, ...]}` (checkpoints/final.host.npz)."""
     with np.load(out / "checkpoints" / "final.host.npz") as host:
         return {n.split("/", 1)[1]: host[n] for n in host.files if n.startswith("history/")}
+
+
+def env_steps_per_seed(out: Path) -> float:
+    """Mean real env steps per seed (K = 1) over the whole run."""
+    return float(load_history(out)["env_steps"][0, :, -1].mean())
+
+
+def mujoco_curves(
+    entries: list[dict], path: Path, title: str, levels: dict[str, float] | None = None
+) -> None:
+    """One panel per finished env: the moving return of each algorithm (mean and 95% band
+    over seeds, K = 1), with a dashed line at `levels[env]` if given. Writes nothing when no
+    run finished."""
+    import matplotlib.pyplot as plt
+
+    from ldn_jax.metrics import mean_band
+
+    done: dict[str, list[dict]] = {}
+    for entry in entries:
+        if entry["status"] == "done":
+            done.setdefault(entry["env"], []).append(entry)
+    if not done:
+        return
+    fig, axes = plt.subplots(1, len(done), figsize=(5 * len(done), 3.8), dpi=120, squeeze=False)
+    for ax, (env, runs) in zip(axes[0], done.items(), strict=True):
+        for entry in runs:
+            history = load_history(entry["dir"])
+            mean, low, high = mean_band(history["moving_return"][0])
+            label = (
+                f"{PAPER_ALGOS.get(entry['algo'], entry['algo'])} ({entry['config'].seeds} seeds)"
+            )
+            (line,) = ax.plot(history["episodes"][0, 0], mean, label=label)
+            ax.fill_between(
+                history["episodes"][0, 0], low, high, color=line.get_color(), alpha=0.2, lw=0
+            )
+        if levels and env in levels:
+            ax.axhline(levels[env], color="grey", linestyle="--", linewidth=1, label="the top")
+        ax.set_title(env)
+        ax.set_xlabel("real episodes (summed over workers)")
+        ax.set_ylabel("moving return")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="upper left")
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
 
 
 # -- statistics and files -----------------------------------------------------------------------
