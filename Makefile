@@ -32,8 +32,9 @@ format: $(STAMP)
 bench: $(STAMP)
 	$(PY) bench/bench.py $(BENCH_ARGS)
 
-# The paper's CartPole results into experiments/results/ (REPORT.md there); SCALE=paper for the
-# larger budget. Training runs are kept in experiments/results/runs/ and reused.
+# The paper's results into experiments/results/ (REPORT.md there): CartPole, inverted_pendulum and a
+# short halfcheetah run on CPU; SCALE=paper for the larger budget and every MuJoCo task.
+# Training runs are kept in experiments/results/runs/ and reused.
 SCALE ?= cpu
 paper: $(STAMP)
 	$(PY) experiments/paper/all.py --scale $(SCALE)
