@@ -100,6 +100,7 @@ def shadow_rollouts(
         raise ValueError(f"shadow rollouts need an env whose observation is its state, not {env}")
     if trainer.dynamics is None:
         raise ValueError("shadow rollouts need a model-based run (a2c-model, ldn, ...)")
+    _check_single_model(trainer)
     from_obs = jax.vmap(STATE_FROM_OBS[type(env)])
     step = jax.vmap(env.step, (0, 0, 0, None))
     k_reset, k_play = jax.random.split(key)
@@ -164,6 +165,7 @@ def fit_ensemble(
     Returns their parameters stacked `[E, ...]` and each member's last mean loss `[E]`.
     M1 saw the buffer grow over training; the members see only its final content.
     """
+    _check_single_model(trainer)
     dynamics = trainer.dynamics
 
     def member(key: Array):
@@ -174,6 +176,13 @@ def fit_ensemble(
         return model.params, losses[-1] if rounds else jnp.zeros(())
 
     return jax.vmap(member)(jax.random.split(key, members))
+
+
+def _check_single_model(trainer: Trainer) -> None:
+    if trainer.dynamics is not None and trainer.dynamics.ensemble:
+        raise ValueError(
+            "calibration compares M1 with M0; this run trained an ensemble (ld = ensemble)"
+        )
 
 
 def load_run(run_dir: str | Path) -> tuple[Config, Trainer, TrainState]:
