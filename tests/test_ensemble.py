@@ -1,13 +1,18 @@
-"""The ensemble learning degree (`ld = "ensemble"`): its maths, the vmapped fit, imagination with
-agreeing members, and the config."""
+"""The ensemble learning degree (`--ld ensemble`): its maths, the vmapped fit, imagination with
+agreeing members, an end-to-end run, and the config and CLI plumbing."""
 
 import json
+import subprocess
+import sys
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from experiments.run import read_run_config, train
+from ldn_jax import checkpoint, load_policy
 from ldn_jax.buffer import buffer_add, buffer_init
 from ldn_jax.config import AgentConfig, Config, ModelConfig, from_preset, validate
 from ldn_jax.dynamics import Dynamics, ModelState
@@ -21,8 +26,14 @@ from ldn_jax.learning_degree import (
     ensemble_stop_probability,
     relative_disagreement,
 )
+from ldn_jax.policy import FINAL_CHECKPOINT
 from ldn_jax.rollout import play_episodes
+from ldn_jax.train import Trainer
 from tests.test_core import _cartpole_transitions
+
+ROOT = Path(__file__).resolve().parents[1]
+RUN = [sys.executable, str(ROOT / "experiments" / "run.py")]
+
 
 # -- (a) the estimator's maths ---------------------------------------------------------------
 
@@ -202,3 +213,62 @@ def test_config_round_trips_and_old_configs_load_as_m0():
 def test_bad_ld_config_is_one_line(model, needle):
     with pytest.raises(ValueError, match=needle):
         validate(from_preset("paper", env="cartpole-v0", model={"ld": "ensemble", **model}))
+
+
+# -- (d, e) an end-to-end run from the CLI, its twin in-process, checkpoints and resume ------
+
+ARGS = ["--env", "cartpole-v0", "--algo", "ldn", "--seeds", "2", "--k", "1", "--episodes", "16"]
+ARGS += ["--workers", "4", "--chunk", "2", "--checkpoint-every", "0", "--quiet"]
+
+
+@pytest.fixture(scope="module")
+def ensemble_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("ensemble") / "run"
+    flags = ["--ld", "ensemble", "--ensemble-size", "3", "--out", str(out)]
+    result = subprocess.run([*RUN, *ARGS, *flags], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    return out
+
+
+def _metric_lines(run_dir: Path) -> list[dict]:
+    lines = [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
+    for line in lines:
+        line.pop("wall_seconds")
+    return lines
+
+
+def test_ensemble_run_is_finite_deterministic_and_loads(ensemble_run, tmp_path):
+    config = read_run_config(ensemble_run)
+    assert config.model.ld == "ensemble" and config.model.ensemble == 3
+    first = _metric_lines(ensemble_run)
+    assert len(first) == 2 * 4  # seeds x iterations
+    for line in first:
+        assert line["imagined_steps"] > 0 and 0 < line["ld_mean"] <= 1
+        assert all(v is not None and np.isfinite(v) for v in line["losses"].values()), line
+    assert json.loads((ensemble_run / "summary.json").read_text())["runs"][0]["diverged"] is None
+    # The same config again, in this process: the same bits.
+    train(config, tmp_path, 0, quiet=True)
+    assert _metric_lines(tmp_path) == first
+    # The checkpoint holds the members stacked [K, S, E, ...], M0 copies untouched.
+    trainer = Trainer(config)
+    initial = trainer.init_batch()
+    final = checkpoint.restore(
+        ensemble_run / "checkpoints" / FINAL_CHECKPOINT, jax.eval_shape(trainer.init_batch)
+    )
+    for leaf in jax.tree.leaves(final.model.params):
+        assert leaf.shape[:3] == (1, 2, 3)
+    leaves = lambda tree: jax.tree.leaves(tree.model.frozen)
+    for a, b in zip(leaves(final), leaves(initial), strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert np.isfinite(final.model.error_scale).all() and (final.model.error_scale != 1).all()
+    act = load_policy(ensemble_run, seed=1)
+    assert act(np.array([0.01, 0.0, 0.02, 0.1], np.float32)) in (0, 1)
+
+
+@pytest.mark.parametrize("flag", [["--ld", "m0"], ["--ensemble-size", "4"]])
+def test_resume_refuses_a_different_estimator(ensemble_run, flag):
+    result = subprocess.run(
+        [*RUN, "--resume", str(ensemble_run), *flag], capture_output=True, text=True, timeout=60
+    )
+    assert result.returncode == 2 and result.stderr.count("\n") == 1, result.stderr
+    assert "does not match the run being resumed" in result.stderr
