@@ -34,6 +34,7 @@ from ldn_jax.config import (
     BACKENDS,
     DEFAULT_CHUNK,
     DEFAULT_EPISODES,
+    LD_ESTIMATORS,
     PRESETS,
     Config,
     from_preset,
@@ -82,6 +83,15 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--preset", help=f"one of: {', '.join(PRESETS)} (default paper)")
     p.add_argument("--threshold", type=float, help="moving-return threshold")
     p.add_argument("--chunk", type=int, help="iterations per compiled chunk (default 5)")
+    p.add_argument(
+        "--ld",
+        choices=LD_ESTIMATORS,
+        help="learning-degree estimator: m0 (M1 vs its initial copy M0, the paper) or ensemble "
+        "(disagreement of --ensemble-size models relative to their fit error) (default m0)",
+    )
+    p.add_argument(
+        "--ensemble-size", type=int, metavar="E", help="members with --ld ensemble (default 5)"
+    )
     p.add_argument("--out", help="run directory (default runs/ENV-ALGO-TIME)")
     p.add_argument("--resume", metavar="DIR", help="continue the run in DIR from its checkpoint")
     p.add_argument(
@@ -117,7 +127,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         raise UsageError("--checkpoint-every must be >= 0")
     cluster = [f for f in ("coordinator", "num_processes", "process_id") if getattr(args, f)]
     if cluster and not args.distributed:
-        raise UsageError(f"--{cluster[0].replace('_', '-')} needs --distributed")
+        raise UsageError(f"{_flag(cluster[0])} needs --distributed")
     if args.distributed and not (args.out or args.resume or args.dry_run):
         raise UsageError("--distributed needs --out (every process must name the same run)")
     return args
@@ -189,8 +199,20 @@ CONFIG_FLAGS = {
     "threshold": "threshold",
     "chunk": "chunk_iterations",
     "backend": "backend",
+    "ld": "model.ld",
+    "ensemble_size": "model.ensemble",
 }
-"""CLI flag -> the config field it sets."""
+"""CLI flag (its argparse name) -> the config field it sets (`model.X`: a `ModelConfig` field)."""
+
+
+def _flag(name: str) -> str:
+    return "--" + name.replace("_", "-")
+
+
+def _field(config: Config, field: str):
+    for part in field.split("."):
+        config = getattr(config, part)
+    return config
 
 
 def build_config(args: argparse.Namespace) -> Config:
@@ -206,9 +228,15 @@ def build_config(args: argparse.Namespace) -> Config:
     overrides["k"] = k if ALGORITHMS.get(algo, ALGORITHMS["ldn"]).ld_stop else k[:1] or k
     if overrides["env"] in DEFAULT_CHUNK:
         overrides["chunk_iterations"] = DEFAULT_CHUNK[overrides["env"]]
-    for flag in ("workers", "threshold", "chunk", "backend"):
+    for flag in ("workers", "threshold", "chunk", "backend", "ld", "ensemble_size"):
         if getattr(args, flag) is not None:
-            overrides[CONFIG_FLAGS[flag]] = getattr(args, flag)
+            field = CONFIG_FLAGS[flag]
+            if field.startswith("model."):
+                overrides.setdefault("model", {})[field.split(".", 1)[1]] = getattr(args, flag)
+            else:
+                overrides[field] = getattr(args, flag)
+    if args.ensemble_size is not None and args.ld != "ensemble":
+        raise UsageError("--ensemble-size needs --ld ensemble")
     try:
         return validate(from_preset(given("preset"), **overrides))
     except ValueError as error:
@@ -249,7 +277,7 @@ def check_resume_flags(args: argparse.Namespace, config: Config) -> None:
         value = getattr(args, flag)
         if value is None:
             continue
-        stored = getattr(config, field)
+        stored = _field(config, field)
         if flag == "k":
             value = _parse_k(value)
             stored = tuple(stored)
@@ -257,7 +285,7 @@ def check_resume_flags(args: argparse.Namespace, config: Config) -> None:
                 value = value[:1]
         if value != stored:
             raise UsageError(
-                f"--{flag} {getattr(args, flag)} does not match the run being resumed "
+                f"{_flag(flag)} {getattr(args, flag)} does not match the run being resumed "
                 f"({field} = {stored}); drop the flag to resume"
             )
     if args.out is not None and Path(args.out).resolve() != Path(args.resume).resolve():

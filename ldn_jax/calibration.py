@@ -27,7 +27,14 @@ from scipy import stats
 from envs import cartpole
 from ldn_jax import checkpoint
 from ldn_jax.config import Config
-from ldn_jax.learning_degree import deviation, learning_degree, stop_draw, stop_probability
+from ldn_jax.learning_degree import (
+    deviation,
+    disagreement,
+    ensemble_learning_degree,
+    learning_degree,
+    stop_draw,
+    stop_probability,
+)
 from ldn_jax.policy import FINAL_CHECKPOINT
 from ldn_jax.train import Trainer, TrainState
 
@@ -69,16 +76,6 @@ class ShadowSteps:
     """The shadow real episode has not terminated before this step."""
 
 
-def ensemble_learning_degree(disagreement: Array, k: Array | float = 1.0) -> Array:
-    """Eq. 4/6's mapping applied to ensemble disagreement, flipped: 2 sigmoid(-K d), in (0, 1].
-
-    M1's deviation from M0 grows with what it has learned; disagreement grows with what the
-    models do not know. So LD is 1 where the members agree and falls as they disagree, and the
-    stop probability 1 - LD = 2 sigmoid(K d) - 1 is eq. 4 on the disagreement.
-    """
-    return 2.0 * jax.nn.sigmoid(-k * disagreement)
-
-
 def _predict(trainer: Trainer, params: dict, obs: Array, onehot: Array) -> Array:
     """`[N, obs], [N, A] -> [N, obs + 1]`: the model's [s', r], as eq. 2 and 3 see it."""
     next_obs, reward = trainer.dynamics.predict(params, obs, onehot)
@@ -103,6 +100,7 @@ def shadow_rollouts(
         raise ValueError(f"shadow rollouts need an env whose observation is its state, not {env}")
     if trainer.dynamics is None:
         raise ValueError("shadow rollouts need a model-based run (a2c-model, ldn, ...)")
+    _check_single_model(trainer)
     from_obs = jax.vmap(STATE_FROM_OBS[type(env)])
     step = jax.vmap(env.step, (0, 0, 0, None))
     k_reset, k_play = jax.random.split(key)
@@ -124,11 +122,11 @@ def shadow_rollouts(
         real_next, real, _, real_terminated, _, _ = step(env_keys, real, action, params)
         next_obs = predicted[..., :-1]
         if ensemble is None:
-            disagreement = jnp.zeros_like(sigma2)
+            spread = jnp.zeros_like(sigma2)
         else:
             members = jax.vmap(lambda p: _predict(trainer, p, imagined, onehot))(ensemble)
-            disagreement = 0.5 * members.var(axis=0).mean(axis=-1)
-        p_continue = ensemble_learning_degree(disagreement, k)
+            spread = disagreement(members)
+        p_continue = ensemble_learning_degree(spread, k)
         ensemble_stop = jax.random.uniform(k_ensemble, p_continue.shape) >= p_continue
         out = ShadowSteps(
             ld=learning_degree(sigma2, k),
@@ -136,7 +134,7 @@ def shadow_rollouts(
             sigma2_reward=sigma2_reward,
             one_step_error=jnp.linalg.norm(next_obs - true_next, axis=-1),
             compounding_error=jnp.linalg.norm(next_obs - real_next, axis=-1),
-            disagreement=disagreement,
+            disagreement=spread,
             live=live,
             ld_live=ld_live,
             ensemble_live=ensemble_live,
@@ -167,6 +165,7 @@ def fit_ensemble(
     Returns their parameters stacked `[E, ...]` and each member's last mean loss `[E]`.
     M1 saw the buffer grow over training; the members see only its final content.
     """
+    _check_single_model(trainer)
     dynamics = trainer.dynamics
 
     def member(key: Array):
@@ -177,6 +176,13 @@ def fit_ensemble(
         return model.params, losses[-1] if rounds else jnp.zeros(())
 
     return jax.vmap(member)(jax.random.split(key, members))
+
+
+def _check_single_model(trainer: Trainer) -> None:
+    if trainer.dynamics is not None and trainer.dynamics.ensemble:
+        raise ValueError(
+            "calibration compares M1 with M0; this run trained an ensemble (ld = ensemble)"
+        )
 
 
 def load_run(run_dir: str | Path) -> tuple[Config, Trainer, TrainState]:

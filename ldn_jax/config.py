@@ -15,6 +15,10 @@ import envs
 
 ACTIVATIONS = ("linear", "relu", "relu6", "tanh")
 
+LD_ESTIMATORS = ("m0", "ensemble")
+"""How the learning degree is estimated: M1 against its frozen initial copy M0 (eq. 3-6), or
+the disagreement of an ensemble of models (`ldn_jax.learning_degree`)."""
+
 
 @dataclass(frozen=True)
 class Algorithm:
@@ -90,6 +94,14 @@ class AgentConfig:
 @dataclass(frozen=True)
 class ModelConfig:
     """The dynamics model M1, its frozen twin M0, and how M1 is fitted."""
+
+    ld: str = "m0"
+    """Learning-degree estimator, one of `LD_ESTIMATORS`: "m0" compares M1 with M0 (eq. 3-6);
+    "ensemble" fits `ensemble` independently initialised models instead of one, imagines with
+    their mean prediction, and takes LD = 2 sigmoid(-K d_rel) from their disagreement relative
+    to their fit error."""
+    ensemble: int = 5
+    """Members E of the ensemble (used only when `ld` is "ensemble")."""
 
     hidden: int = 200
     """Hidden units of each of the two model nets ((s, a) -> s' and s' -> r)."""
@@ -281,6 +293,11 @@ def validate(config: Config) -> Config:
         (config.model.updates >= 0, "model updates must be >= 0"),
         (config.model.batch_size >= 1, "model batch_size must be >= 1"),
         (config.model.buffer_capacity >= 1, "buffer_capacity must be >= 1"),
+        (
+            config.model.ld in LD_ESTIMATORS,
+            f"unknown ld {config.model.ld!r}; valid: {', '.join(LD_ESTIMATORS)}",
+        ),
+        (config.model.ensemble >= 2, f"ensemble size must be >= 2, got {config.model.ensemble}"),
     ]
     for ok, message in checks:
         if not ok:

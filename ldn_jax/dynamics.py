@@ -1,4 +1,8 @@
-"""The dynamics model: M1 (trained) and M0 (its frozen initial copy), fit and predict."""
+"""The dynamics model: M1 (trained) and M0 (its frozen initial copy), fit and predict.
+
+With `ModelConfig.ld = "ensemble"` M1 is E models ("members") whose parameters, optimiser
+states and M0 copies are stacked on a leading axis `[E, ...]`; they share the normaliser.
+"""
 
 from __future__ import annotations
 
@@ -27,12 +31,19 @@ class Normalizer:
 @struct.dataclass
 class ModelState:
     params: dict
-    """M1's parameters: fitted on real transitions."""
+    """M1's parameters: fitted on real transitions. Ensemble: every member's, `[E, ...]`."""
     frozen: dict
-    """M0's parameters: M1's initial parameters, never updated."""
+    """M0's parameters: M1's initial parameters, never updated. Ensemble: each member's
+    initial copy `[E, ...]`, kept (unused by imagination) so the state has one layout."""
     opt_state: optax.OptState
+    """M1's Adam state. Ensemble: each member's, `[E, ...]`."""
     stats: Normalizer
-    """Shared by M1 and M0; refreshed from the buffer before each fit when normalising."""
+    """Shared by M1 and M0 (and all members); refreshed from the buffer before each fit when
+    normalising."""
+    error_scale: Array | None = None
+    """Ensemble only (None otherwise, so the m0 state and its checkpoints keep their layout):
+    the members' mean eq. 2 loss of the last fit, in the model's normalised units; 1 until the
+    first fit. Disagreement is measured relative to it (`relative_disagreement`)."""
 
 
 class Dynamics:
@@ -51,13 +62,30 @@ class Dynamics:
         )
         self.optimizer = optax.adam(config.lr)
 
+    @property
+    def ensemble(self) -> bool:
+        """M1 is `config.ensemble` stacked members (`ld = "ensemble"`)."""
+        return self.config.ld == "ensemble"
+
     def init(self, key: Array) -> ModelState:
-        params = self.net.init(key, jnp.zeros((1, self.obs_size)), jnp.zeros((1, self.action_size)))
+        """M1 and M0; ensemble: member i initialised from `jax.random.split(key, E)[i]`."""
+        init = lambda key: self.net.init(
+            key, jnp.zeros((1, self.obs_size)), jnp.zeros((1, self.action_size))
+        )
+        if self.ensemble:
+            params = jax.vmap(init)(jax.random.split(key, self.config.ensemble))
+            opt_state = jax.vmap(self.optimizer.init)(params)
+        else:
+            params = init(key)
+            opt_state = self.optimizer.init(params)
         # M0 is M1 at initialisation: the same values, kept apart and never trained.
         frozen = jax.tree.map(jnp.copy, params)
-        stats = self.init_stats()
         return ModelState(
-            params=params, frozen=frozen, opt_state=self.optimizer.init(params), stats=stats
+            params=params,
+            frozen=frozen,
+            opt_state=opt_state,
+            stats=self.init_stats(),
+            error_scale=jnp.ones((), jnp.float32) if self.ensemble else None,
         )
 
     def predict_normalized(
@@ -65,6 +93,13 @@ class Dynamics:
     ) -> tuple[Array, Array]:
         """The net's own outputs: next obs and reward in normalised units."""
         return self.net.apply(params, (obs - stats.obs_mean) / stats.obs_std, action)
+
+    def predict_members(
+        self, params: dict, stats: Normalizer, obs: Array, action: Array
+    ) -> tuple[Array, Array]:
+        """`predict_normalized` for every member of stacked `params` `[E, ...]`:
+        `[..., obs_size], [..., action_size] -> (next_obs [E, ..., obs_size], reward [E, ...])`."""
+        return jax.vmap(self.predict_normalized, (0, None, None, None))(params, stats, obs, action)
 
     @staticmethod
     def denormalize(stats: Normalizer, next_obs: Array, reward: Array) -> tuple[Array, Array]:
@@ -119,18 +154,38 @@ class Dynamics:
         return Normalizer(obs_mean, obs_std, reward_mean, reward_std)
 
     def fit(self, state: ModelState, buffer: Buffer, key: Array) -> tuple[ModelState, Array]:
-        """`config.updates` minibatch Adam steps on M1; returns the mean loss."""
+        """`config.updates` minibatch Adam steps on M1; returns the mean loss.
 
+        Ensemble: every member takes its own steps (vmapped), member i drawing its minibatches
+        with `jax.random.split(key, E)[i]`; the loss returned, and kept as `error_scale`, is
+        the members' mean.
+        """
         if self.config.normalize:
             state = state.replace(stats=self.buffer_stats(buffer))
-
-        def update(state: ModelState, key: Array):
-            batch = buffer_sample(buffer, key, self.config.batch_size)
-            loss, grads = jax.value_and_grad(self.loss)(state.params, batch, state.stats)
-            updates, opt_state = self.optimizer.update(grads, state.opt_state, state.params)
-            params = optax.apply_updates(state.params, updates)
+        if not self.ensemble:
+            params, opt_state, loss = self._fit_one(
+                state.params, state.opt_state, state.stats, buffer, key
+            )
             return state.replace(params=params, opt_state=opt_state), loss
+        keys = jax.random.split(key, self.config.ensemble)
+        fit = jax.vmap(self._fit_one, (0, 0, None, None, 0))
+        params, opt_state, losses = fit(state.params, state.opt_state, state.stats, buffer, keys)
+        loss = losses.mean()
+        error_scale = loss if self.config.updates else state.error_scale
+        return state.replace(params=params, opt_state=opt_state, error_scale=error_scale), loss
+
+    def _fit_one(
+        self, params: dict, opt_state: optax.OptState, stats: Normalizer, buffer: Buffer, key: Array
+    ) -> tuple[dict, optax.OptState, Array]:
+        """One model's `config.updates` steps: its new params, Adam state and mean loss."""
+
+        def update(carry, key: Array):
+            params, opt_state = carry
+            batch = buffer_sample(buffer, key, self.config.batch_size)
+            loss, grads = jax.value_and_grad(self.loss)(params, batch, stats)
+            updates, opt_state = self.optimizer.update(grads, opt_state, params)
+            return (optax.apply_updates(params, updates), opt_state), loss
 
         keys = jax.random.split(key, self.config.updates)
-        state, losses = jax.lax.scan(update, state, keys)
-        return state, losses.mean() if self.config.updates else jnp.zeros(())
+        (params, opt_state), losses = jax.lax.scan(update, (params, opt_state), keys)
+        return params, opt_state, losses.mean() if self.config.updates else jnp.zeros(())

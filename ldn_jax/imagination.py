@@ -3,6 +3,9 @@
 Predicted termination (the env's own termination test on M1's predicted observation) ends
 an imagined episode as terminal: no bootstrap. The LD draw ends it as a truncation: the critic
 bootstraps, since the episode itself had not ended.
+
+With an ensemble (`ModelConfig.ld = "ensemble"`) the world steps the members' mean prediction
+and the LD comes from their disagreement instead of from M1 vs M0.
 """
 
 from __future__ import annotations
@@ -13,7 +16,17 @@ import jax
 import jax.numpy as jnp
 
 from ldn_jax.dynamics import Dynamics, ModelState
-from ldn_jax.learning_degree import deviation, learning_degree, stop_draw, stop_probability
+from ldn_jax.learning_degree import (
+    deviation,
+    disagreement,
+    ensemble_learning_degree,
+    ensemble_mean,
+    ensemble_stop_probability,
+    learning_degree,
+    relative_disagreement,
+    stop_draw,
+    stop_probability,
+)
 from ldn_jax.rollout import WorldStep
 
 Array = jax.Array
@@ -28,32 +41,48 @@ def model_world(
     k: Array,
     ld_stop: bool,
 ) -> WorldStep:
-    """A world that steps M1. Its extras carry each step's learning degree `ld`.
+    """A world that steps M1 (an ensemble: its members' mean prediction). Its extras carry
+    each step's learning degree `ld`.
 
     `env_reward(obs, action, next_obs)`, if not None, replaces the model's reward (the LD
-    still compares both models' whole output). `model_action` encodes the env action as the
+    still reads the models' whole output). `model_action` encodes the env action as the
     model takes it (one-hot, or the clipped vector). The deviation of eq. 3 is taken in the
     model's normalised output space (the raw one when normalisation is off), so no
-    observation dimension dominates it by its units.
+    observation dimension dominates it by its units; so is an ensemble's disagreement.
     """
+    estimate = _ensemble_estimate if dynamics.ensemble else _m0_estimate
 
     def step(key: Array, world: None, obs: Array, action: Array):
         encoded = model_action(action)
-        m1 = dynamics.predict_normalized(model.params, model.stats, obs, encoded)
-        m0 = dynamics.predict_normalized(model.frozen, model.stats, obs, encoded)
-        next_obs, reward = dynamics.denormalize(model.stats, *m1)
+        predicted, ld, p_stop = estimate(dynamics, model, obs, encoded, k)
+        next_obs, reward = dynamics.denormalize(model.stats, *predicted)
         if env_reward is not None:
             reward = env_reward(obs, action, next_obs)
-        sigma2 = deviation(
-            jnp.concatenate([m1[0], m1[1][..., None]], axis=-1),
-            jnp.concatenate([m0[0], m0[1][..., None]], axis=-1),
-        )
-        ld = learning_degree(sigma2, k)
-        if ld_stop:
-            stop = stop_draw(key, stop_probability(sigma2, k))
-        else:
-            stop = jnp.zeros_like(ld, bool)
+        stop = stop_draw(key, p_stop) if ld_stop else jnp.zeros_like(ld, bool)
         terminated = is_terminal(next_obs)
         return next_obs, world, reward, terminated, stop, {"ld": ld}
 
     return step
+
+
+def _m0_estimate(dynamics: Dynamics, model: ModelState, obs: Array, action: Array, k: Array):
+    """M1's normalised prediction, and LD and P(stop) of M1 vs M0 (eq. 3-6)."""
+    m1 = dynamics.predict_normalized(model.params, model.stats, obs, action)
+    m0 = dynamics.predict_normalized(model.frozen, model.stats, obs, action)
+    sigma2 = deviation(_joined(*m1), _joined(*m0))
+    return m1, learning_degree(sigma2, k), stop_probability(sigma2, k)
+
+
+def _ensemble_estimate(dynamics: Dynamics, model: ModelState, obs: Array, action: Array, k: Array):
+    """The members' mean normalised prediction, and LD and P(stop) of their disagreement
+    relative to their fit error."""
+    members = _joined(*dynamics.predict_members(model.params, model.stats, obs, action))
+    mean = ensemble_mean(members)
+    d_rel = relative_disagreement(disagreement(members), model.error_scale)
+    predicted = (mean[..., :-1], mean[..., -1])
+    return predicted, ensemble_learning_degree(d_rel, k), ensemble_stop_probability(d_rel, k)
+
+
+def _joined(next_obs: Array, reward: Array) -> Array:
+    """The model's output as eq. 2 and 3 see it: `[..., D], [...] -> [..., D + 1]`."""
+    return jnp.concatenate([next_obs, reward[..., None]], axis=-1)

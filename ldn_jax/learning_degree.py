@@ -3,6 +3,10 @@
 LD measures how far the trained model M1 has moved from its frozen initial copy M0 on an
 input: near 0 where M1 has learned nothing (imagination stops at once), towards 1 where it has
 learned much (imagination goes on).
+
+The alternative estimator (`ModelConfig.ld = "ensemble"`) reads the disagreement of E
+independently initialised models instead, relative to their own fit error: LD is near 1 where
+they agree and falls as they disagree.
 """
 
 from __future__ import annotations
@@ -39,6 +43,57 @@ def stop_probability(sigma2: Array, k: Array | float = 1.0) -> Array:
 def stop_draw(key: Array, p_stop: Array) -> Array:
     """Stop where u < P(stop), u ~ U[0, 1): with P(stop) = 1 - LD this is eq. 5."""
     return jax.random.uniform(key, p_stop.shape) < p_stop
+
+
+# -- the ensemble estimator ------------------------------------------------------------------
+
+ERROR_FLOOR = 1e-10
+"""Floor of the error scale that disagreement is divided by: only guards against a zero scale
+(a fit of zero updates); real fit losses are far above it (linear members on CartPole: ~1e-6)."""
+
+
+def ensemble_mean(members: Array) -> Array:
+    """The members' mean prediction: `[E, ..., D] -> [..., D]`.
+
+    Taken as member 0 plus the mean deviation from it, which is exactly member 0 when all
+    members agree (a plain mean of E equal float32 values need not round back to them).
+    """
+    return members[0] + jnp.mean(members - members[0], axis=0)
+
+
+def disagreement(members: Array) -> Array:
+    """Eq. 3's form on an ensemble: d = 1/2 the variance over members, mean over output dims.
+
+    `[E, ..., D] -> [...]`; exactly 0 when all members agree.
+    """
+    centred = members - ensemble_mean(members)
+    return 0.5 * jnp.mean(jnp.mean(jnp.square(centred), axis=0), axis=-1)
+
+
+def relative_disagreement(d: Array, error_scale: Array | float) -> Array:
+    """d / max(error_scale, `ERROR_FLOOR`): disagreement in units of the members' fit MSE.
+
+    Well-fitted members disagree by tiny amounts in absolute terms (linear ones on CartPole:
+    ~1e-6), which would make K meaningless; relative to the error the members are known to
+    make, d_rel ~ 1 means "they disagree as much as they err".
+    """
+    return d / jnp.maximum(error_scale, ERROR_FLOOR)
+
+
+def ensemble_learning_degree(d: Array, k: Array | float = 1.0) -> Array:
+    """Eq. 4/6's mapping applied to ensemble disagreement, flipped: 2 sigmoid(-K d), in (0, 1].
+
+    M1's deviation from M0 grows with what it has learned; disagreement grows with what the
+    models do not know. So LD is 1 where the members agree and falls as they disagree, and the
+    stop probability 1 - LD = 2 sigmoid(K d) - 1 is eq. 4 on the disagreement. `[...] -> [...]`.
+    """
+    return 2.0 * jax.nn.sigmoid(-k * d)
+
+
+def ensemble_stop_probability(d: Array, k: Array | float = 1.0) -> Array:
+    """1 - `ensemble_learning_degree` = tanh(K d / 2), exact near d = 0 where 1 - 2 sigmoid(-K d)
+    cancels. `[...] -> [...]`; exactly 0 at d = 0, so members that agree never stop."""
+    return jnp.tanh(0.5 * k * d)
 
 
 LD_BINS = 10

@@ -35,7 +35,8 @@ class TrainState:
 
     learner: LearnerState
     model: ModelState | None
-    """M1, frozen M0 and M1's optimiser; None for model-free algorithms."""
+    """M1, frozen M0 and M1's optimiser (each `[E, ...]` for an ensemble); None for model-free
+    algorithms."""
     buffer: Buffer | None
     """Real transitions for fitting M1; None for model-free algorithms."""
     moving_return: Array

@@ -74,6 +74,9 @@ def test_load_policy_returns_python_ints(run_dir):
         (["--seeds", "0"], "seeds must be >= 1"),
         (["--seeds", "two"], "invalid int value"),
         (["--out", "/proc/forbidden/run"], "cannot write to --out"),
+        (["--ld", "bayes"], "argument --ld: invalid choice: 'bayes'"),
+        (["--ld", "ensemble", "--ensemble-size", "1"], "ensemble size must be >= 2, got 1"),
+        (["--ensemble-size", "3"], "--ensemble-size needs --ld ensemble"),
     ],
 )
 def test_bad_input_exits_2_with_one_line(args, needle):
