@@ -8,7 +8,8 @@ alongside with the same actions (the "shadow"). Per imagined step this records:
   played from the same initial state with the same actions;
 - the learning degree of M1 vs M0 (eq. 3-6) and whether the LD draw would have stopped here;
 - optionally the disagreement of an ensemble of E extra models fitted on the same real buffer,
-  mapped to a learning degree with the same K (`ensemble_learning_degree`).
+  mapped to a learning degree with the same K as `--ld ensemble` trains with: relative to the
+  members' fit error, LD = 2 sigmoid(-K d / error) (`ensemble_learning_degree`).
 
 Nothing here changes training: it reads a `TrainState` and returns arrays.
 """
@@ -32,6 +33,7 @@ from ldn_jax.learning_degree import (
     disagreement,
     ensemble_learning_degree,
     learning_degree,
+    relative_disagreement,
     stop_draw,
     stop_probability,
 )
@@ -66,6 +68,8 @@ class ShadowSteps:
     disagreement: Array
     """Ensemble disagreement: 1/2 the variance over members, mean over output dims (eq. 3's
     form); zero without an ensemble."""
+    ensemble_ld: Array
+    """The ensemble's learning degree, 2 sigmoid(-K d / error_scale) (one without one)."""
     live: Array
     """The imagined episode is running: before predicted termination (the a2c-model rule)."""
     ld_live: Array
@@ -89,11 +93,14 @@ def shadow_rollouts(
     episodes: int,
     k: Array | float,
     ensemble: dict | None = None,
+    error_scale: Array | float = 1.0,
 ) -> ShadowSteps:
     """Play `episodes` imagined episodes in one run's M1 with the real env alongside.
 
     `state` is one seed's (unbatched) state of a model-based run; `ensemble` is a stack of
-    model parameters `[E, ...]` (see `fit_ensemble`) or None.
+    model parameters `[E, ...]` (see `fit_ensemble`) or None, and `error_scale` the members'
+    fit MSE that their disagreement is measured against (as `ModelState.error_scale` in a run
+    trained with `--ld ensemble`).
     """
     env, params = trainer.env, trainer.env_params
     if type(env) not in STATE_FROM_OBS:
@@ -126,7 +133,7 @@ def shadow_rollouts(
         else:
             members = jax.vmap(lambda p: _predict(trainer, p, imagined, onehot))(ensemble)
             spread = disagreement(members)
-        p_continue = ensemble_learning_degree(spread, k)
+        p_continue = ensemble_learning_degree(relative_disagreement(spread, error_scale), k)
         ensemble_stop = jax.random.uniform(k_ensemble, p_continue.shape) >= p_continue
         out = ShadowSteps(
             ld=learning_degree(sigma2, k),
@@ -135,6 +142,7 @@ def shadow_rollouts(
             one_step_error=jnp.linalg.norm(next_obs - true_next, axis=-1),
             compounding_error=jnp.linalg.norm(next_obs - real_next, axis=-1),
             disagreement=spread,
+            ensemble_ld=p_continue,
             live=live,
             ld_live=ld_live,
             ensemble_live=ensemble_live,
@@ -276,6 +284,11 @@ def calibration_summary(steps: ShadowSteps) -> dict:
             "sigma2_reward_share": _finite(steps.sigma2_reward[mask].sum() / sigma2)
             if sigma2 > 0
             else None,
+        }
+        ens = steps.ensemble_ld[mask]
+        entry["ensemble_ld"] = {
+            "mean": _finite(ens.mean()) if ens.size else None,
+            "quantiles_10_50_90": np.percentile(ens, [10, 50, 90]).tolist() if ens.size else None,
         }
         summary[population] = entry
     summary["horizons"] = {

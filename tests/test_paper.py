@@ -69,6 +69,17 @@ def test_shadow_rollouts_of_an_untrained_model():
     np.testing.assert_array_equal(steps.ld_live.sum(0), 1)
     np.testing.assert_array_equal(steps.disagreement, 0.0)
     np.testing.assert_array_equal(steps.ensemble_live, steps.live)
+    np.testing.assert_array_equal(steps.ensemble_ld, 1.0)
+    # Twins that disagree by a little, measured against a smaller fit error: the ensemble rule
+    # stops episodes the predicted-termination rule lets run.
+    apart = jax.tree.map(lambda p: jnp.stack([p, p * 1.01]), state.model.params)
+    spread = jax.device_get(
+        jax.jit(cal.shadow_rollouts, static_argnums=(0, 3))(
+            trainer, state, jax.random.key(1), 6, 1.0, apart, 1e-9
+        )
+    )
+    assert (spread.ensemble_ld[0] < 1.0).all()
+    assert spread.ensemble_live.sum() < spread.live.sum()
     # Imagined and real trajectories start from the same state with the same action.
     np.testing.assert_allclose(steps.compounding_error[0], steps.one_step_error[0], rtol=1e-6)
     assert (steps.one_step_error[0] > 0).all()  # an untrained model is wrong

@@ -47,7 +47,13 @@ def analyse(trainer: Trainer, states, scale: common.Scale, key) -> tuple[cal.Sha
         k_fit, k_play = jax.random.split(key)
         members, losses = cal.fit_ensemble(trainer, state, k_fit, scale.ensemble_members, rounds)
         steps = cal.shadow_rollouts(
-            trainer, state, k_play, scale.calibration_episodes, k, ensemble=members
+            trainer,
+            state,
+            k_play,
+            scale.calibration_episodes,
+            k,
+            ensemble=members,
+            error_scale=losses.mean(),
         )
         return steps, losses
 
@@ -189,7 +195,8 @@ def main(argv: list[str] | None = None) -> int:
         "trajectory from the same start with the same actions (while that one is running)",
         "populations": "imagined: every imagined step before predicted termination (LD not "
         "applied); ld_rule: the steps before the LD draw stops the episode",
-        "ensemble_ld": "2 sigmoid(-K d), d = 1/2 variance over members, mean over [s', r]",
+        "ensemble_ld": "2 sigmoid(-K d / e), d = 1/2 variance over members, mean over [s', r], "
+        "e = the members' mean final fit MSE (the estimator of `--ld ensemble`)",
         "points": points,
     }
     common.write_json(out / "calibration.json", record)

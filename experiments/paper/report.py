@@ -15,7 +15,6 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-import numpy as np
 from scipy import stats
 
 from experiments.paper import common
@@ -422,16 +421,18 @@ def calibration_section(data: dict | None) -> tuple[list[str], list[str]]:
         "ensemble's learning degree:",
         "",
         "| episodes | predicted termination: mean / median / p90 | LD rule: mean / median / p90 "
-        "/ max | ensemble rule: mean / median | ensemble final loss |",
-        "|---|---|---|---|---|",
+        "/ max | ensemble rule: mean / median | mean ensemble LD | ensemble final loss |",
+        "|---|---|---|---|---|---|",
     ]
     for p in data["points"]:
         h = p["pooled"]["horizons"]
+        ens_ld = p["pooled"]["imagined"].get("ensemble_ld", {}).get("mean")
         a, b, c = h["predicted_termination"], h["ld_rule"], h["ensemble_rule"]
         lines.append(
             f"| {p['episodes']:,} | {a['mean']:.1f} / {a['median']:.0f} / {a['p90']:.0f} | "
             f"{b['mean']:.2f} / {b['median']:.0f} / {b['p90']:.0f} / {b['max']} | "
-            f"{c['mean']:.1f} / {c['median']:.0f} | {p['ensemble']['final_loss_mean']:.2e} |"
+            f"{c['mean']:.1f} / {c['median']:.0f} | {num(ens_ld)} | "
+            f"{p['ensemble']['final_loss_mean']:.2e} |"
         )
     lines.append("")
     sources = "; ".join(f"{p['episodes']:,}: {p['source']}" for p in data["points"])
@@ -469,16 +470,16 @@ def calibration_section(data: dict | None) -> tuple[list[str], list[str]]:
                 f"probability about {1 - ld['mean']:.2f}. LD = 0.9 at that sigma2 would need "
                 f"K = {2.944 / ld['sigma2_mean']:.0f}."
             )
-        binned = last["binned_one_step_error"]["disagreement"]
-        if binned["count"]:
-            d = sum(m * c for m, c in zip(binned["score_mean"], binned["count"], strict=True))
-            d /= sum(binned["count"])
+        ens_ld = last["pooled"]["imagined"].get("ensemble_ld", {}).get("mean")
+        if ens_ld is not None:
+            e = last["pooled"]["horizons"]["ensemble_rule"]
             findings.append(
-                f"Ensemble learning degree with the same K = 1: the members disagree by d = "
-                f"{d:.1e} on average, so 2 sigmoid(-K d) is 1 to {-int(np.floor(np.log10(d)))} "
-                "digits and its draw (almost) never stops an imagined episode (its horizons "
-                "equal those of predicted termination); a usable K would be of order "
-                f"1/d = {1 / d:.0e}."
+                f"Ensemble learning degree (the estimator of `--ld ensemble`, K = 1, "
+                f"disagreement relative to the members' fit error) at {last['episodes']:,} "
+                f"episodes: it averages {ens_ld:.3f} over imagined steps (M1-vs-M0 LD: "
+                f"{last['pooled']['imagined']['ld']['mean']:.3f}), so its rule imagines "
+                f"{e['mean']:.1f} steps per episode on average (median {e['median']:.0f}) "
+                f"against the LD rule's {h['mean']:.2f}."
             )
         findings.append(
             f"LD calibration at {last['episodes']:,} episodes: AUC of LD for high one-step error "
