@@ -113,14 +113,15 @@ def _json(results: Path, name: str) -> dict:
 
 def test_smoke_trains_each_run_once_and_reuses_it(smoke):
     results, stdout = smoke
-    # Table 2's three runs, Figure 9's two (CartPole and inverted_pendulum), Table 4's two
-    # and Table 5's three; the other scripts reuse them.
-    assert stdout.count("training ") == 10, stdout
+    # Table 2's three runs, Figure 9's two (CartPole and inverted_pendulum), the calibration's
+    # ensemble-LD run, Table 4's two and Table 5's three; the other scripts reuse them.
+    assert stdout.count("training ") == 11, stdout
     finished = sorted(p.name for p in (results / "runs" / "smoke").iterdir())
     assert finished == [
         "cartpole-v0-a2c",
         "cartpole-v0-a2c-model",
         "cartpole-v0-ldn",
+        "cartpole-v0-ldn-ensemble",
         "cartpole-v0-ldn-k0.5,1,2",
         "inverted_pendulum-a2c-model",
         "inverted_pendulum-ldn",
@@ -242,6 +243,11 @@ def test_smoke_calibration(smoke):
         assert one_step["steps"] == pooled["imagined"]["steps"] > 0
         assert point["ensemble"]["members"] == 2 and point["ensemble"]["fit_steps_per_member"] > 0
         assert len(point["per_seed"]) == 2
+    m0, ensemble = data["training"]
+    assert (m0["ld"], ensemble["ld"], ensemble["ensemble_members"]) == ("m0", "ensemble", 5)
+    for row in data["training"]:
+        assert row["runs"] == 2 and row["train_seconds"] > 0
+        assert row["imagined_steps_per_real_step"] > 0 and 0 <= row["ld_mean_last_iterations"] <= 1
     assert (results / "calibration" / "calibration.png").stat().st_size > 1000
 
 

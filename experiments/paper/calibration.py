@@ -9,7 +9,8 @@ per seed, `ldn_jax.calibration.shadow_rollouts` plays imagined episodes in M1 wi
 env alongside, and `fit_ensemble` fits E extra models on the real buffer for the
 ensemble-disagreement learning degree. Reported: Pearson and Spearman correlation of LD (and of
 sigma2 and the disagreement) with the true one-step and compounding errors, the ROC AUC of each
-score for "error above its median", and the imagined-horizon distributions.
+score for "error above its median", and the imagined-horizon distributions. Then the same run
+is trained with the ensemble's learning degree (`--ld ensemble`) and compared with it.
 
 Expected if LD tracked model quality: error falls as LD rises (negative correlations, AUC of
 LD below 0.5, i.e. AUC of 1 - LD above 0.5); disagreement should rise with error (AUC above
@@ -110,6 +111,24 @@ def point_record(steps: cal.ShadowSteps, episodes: int, source: str, ensemble: d
     }
 
 
+def training_row(config, run: Path, summary: dict) -> dict:
+    """What one estimator does in training: episodes to threshold, LD, imagined steps."""
+    history = common.load_history(run)
+    return {
+        "ld": config.model.ld,
+        "ensemble_members": config.model.ensemble if config.model.ld == "ensemble" else None,
+        **common.describe([r["episodes_to_threshold"] for r in summary["runs"]]),
+        "episodes_to_threshold": [r["episodes_to_threshold"] for r in summary["runs"]],
+        "final_moving_return": common.describe([r["final_moving_return"] for r in summary["runs"]]),
+        "ld_mean_last_iterations": float(np.nanmean(history["ld_mean"][0, :, -10:])),
+        "imagined_steps_per_real_step": float(
+            history["imagined_steps"][0, :, -1].sum() / history["env_steps"][0, :, -1].sum()
+        ),
+        "train_seconds": summary["train_seconds"],
+        "compile_seconds": summary["compile_seconds"],
+    }
+
+
 def figure(points: list[dict], path: Path) -> None:
     fig, axes = plt.subplots(1, 3, figsize=(15, 4), dpi=120)
     for point in points:
@@ -152,7 +171,12 @@ def main(argv: list[str] | None = None) -> int:
     scale, results = common.parse_args(argv, __doc__)
     config = common.run_config(scale, scale.ld_env, ALGO)
     run = common.run_dir(results, scale, config)
-    common.ensure_run(config, run)
+    training = [training_row(config, run, common.ensure_run(config, run))]
+    # The same run trained with the ensemble's learning degree (`--ld ensemble`).
+    ensemble_config = common.run_config(scale, scale.ld_env, ALGO, ld="ensemble")
+    ensemble_run = common.run_dir(results, scale, ensemble_config)
+    summary = common.ensure_run(ensemble_config, ensemble_run)
+    training.append(training_row(ensemble_config, ensemble_run, summary))
     reference = common.load_history(run)["moving_return"][0]  # [S, N]
 
     trainer = Trainer(config)
@@ -198,6 +222,7 @@ def main(argv: list[str] | None = None) -> int:
         "ensemble_ld": "2 sigmoid(-K d / e), d = 1/2 variance over members, mean over [s', r], "
         "e = the members' mean final fit MSE (the estimator of `--ld ensemble`)",
         "points": points,
+        "training": training,
     }
     common.write_json(out / "calibration.json", record)
     figure(points, out / "calibration.png")

@@ -209,13 +209,13 @@ PAPER_TABLE5 = {
 # -- runs ---------------------------------------------------------------------------------------
 
 
-def run_config(scale: Scale, env: str, algo: str, k: tuple[float, ...] = (1.0,)) -> Config:
+def run_config(scale: Scale, env: str, algo: str, k: tuple[float, ...] = (1.0,), **model) -> Config:
     """The paper preset at this scale. Raises ValueError for a run this scale does not do:
     the scripts report such rows as pending (MuJoCo tasks outside `scale.mujoco_episodes`:
     1,000-step MJX episodes take hours on CPU at the budgets the tables need).
 
     MuJoCo runs take `scale.mujoco_seeds` and one iteration per chunk (an iteration plays up
-    to 8,000 physics steps per seed)."""
+    to 8,000 physics steps per seed). `model` overrides `ModelConfig` fields (e.g. ld)."""
     if env in MUJOCO:
         if env not in scale.mujoco_episodes:
             raise ValueError(f"{env} runs at --scale paper only (MJX on CPU is too slow here)")
@@ -230,11 +230,16 @@ def run_config(scale: Scale, env: str, algo: str, k: tuple[float, ...] = (1.0,))
             "episodes": scale.episodes,
             "chunk_iterations": scale.chunk_iterations,
         }
-    return validate(from_preset("paper", env=env, algo=algo, k=k, workers=scale.workers, **size))
+    config = from_preset(
+        "paper", env=env, algo=algo, k=k, workers=scale.workers, model=model, **size
+    )
+    return validate(config)
 
 
 def run_dir(results: Path, scale: Scale, config: Config) -> Path:
     name = f"{config.env}-{config.algo}"
+    if config.model.ld != "m0":
+        name += f"-{config.model.ld}"
     if len(config.k) > 1 or config.k != (1.0,):
         name += "-k" + ",".join(f"{k:g}" for k in config.k)
     return results / "runs" / scale.name / name

@@ -437,6 +437,24 @@ def calibration_section(data: dict | None) -> tuple[list[str], list[str]]:
     lines.append("")
     sources = "; ".join(f"{p['episodes']:,}: {p['source']}" for p in data["points"])
     lines += [f"Sources of the states: {sources}.", ""]
+    training = data.get("training", [])
+    if training:
+        lines += [
+            "Training with each estimator (the same config and seeds; `--ld ensemble` with "
+            f"E = {training[-1]['ensemble_members']} members):",
+            "",
+            "| learning degree | episodes to threshold: mean ± s.d. | min | max | reached | "
+            "mean LD, last 10 iterations | imagined steps per real step | train s |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
+        for r in training:
+            name = "M1 vs M0 (the paper)" if r["ld"] == "m0" else "ensemble disagreement"
+            lines.append(
+                f"| {name} | {pm(r['mean'], r['sd'])} | {fmt(r['min'], 0)} | {fmt(r['max'], 0)} "
+                f"| {r['reached']}/{r['runs']} | {r['ld_mean_last_iterations']:.3f} | "
+                f"{r['imagined_steps_per_real_step']:.2f} | {r['train_seconds']:.0f} |"
+            )
+        lines.append("")
     findings = []
     last = data["points"][-1]
     one = last["pooled"]["imagined"]["one_step_error"]
@@ -480,6 +498,19 @@ def calibration_section(data: dict | None) -> tuple[list[str], list[str]]:
                 f"{last['pooled']['imagined']['ld']['mean']:.3f}), so its rule imagines "
                 f"{e['mean']:.1f} steps per episode on average (median {e['median']:.0f}) "
                 f"against the LD rule's {h['mean']:.2f}."
+            )
+        rows = {r["ld"]: r for r in training}
+        if {"m0", "ensemble"} <= set(rows) and rows["m0"]["mean"] and rows["ensemble"]["mean"]:
+            m0, ens = rows["m0"], rows["ensemble"]
+            test = _mann_whitney(m0["episodes_to_threshold"], ens["episodes_to_threshold"])
+            cost = ens["train_seconds"] / max(m0["train_seconds"], 1e-9)
+            findings.append(
+                f"Training with the ensemble learning degree on {data['env']}: "
+                f"{ens['mean']:.0f} ± {ens['sd'] or 0:.0f} episodes to threshold "
+                f"({ens['reached']}/{ens['runs']} reached) vs {m0['mean']:.0f} ± "
+                f"{m0['sd'] or 0:.0f} with M1 vs M0 ({test}); it imagines "
+                f"{ens['imagined_steps_per_real_step']:.2f} steps per real step (M1 vs M0: "
+                f"{m0['imagined_steps_per_real_step']:.2f}) at {cost:.1f}x the training time."
             )
         findings.append(
             f"LD calibration at {last['episodes']:,} episodes: AUC of LD for high one-step error "
