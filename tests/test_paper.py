@@ -263,6 +263,7 @@ def test_report_is_generated_from_the_result_files(smoke, tmp_path):
     assert "Figure 9, inverted_pendulum: mean final moving return" in text
     assert "Table 5, inverted_pendulum: " in text
     assert "Pending at this scale" in text and "cores" in text
+    assert "{'" not in text  # no Python value leaks into the prose
     # Change a result file: the report follows it. Remove one: the report says so.
     table2 = _json(results, "table2")
     table2["rows"][2].update(mean=123.4, sd=5.6, reached=2)

@@ -501,16 +501,17 @@ def calibration_section(data: dict | None) -> tuple[list[str], list[str]]:
             )
         rows = {r["ld"]: r for r in training}
         if {"m0", "ensemble"} <= set(rows) and rows["m0"]["mean"] and rows["ensemble"]["mean"]:
-            m0, ens = rows["m0"], rows["ensemble"]
-            test = _mann_whitney(m0["episodes_to_threshold"], ens["episodes_to_threshold"])
-            cost = ens["train_seconds"] / max(m0["train_seconds"], 1e-9)
+            ours, trained = rows["m0"], rows["ensemble"]
+            test = _mann_whitney(ours["episodes_to_threshold"], trained["episodes_to_threshold"])
+            cost = trained["train_seconds"] / max(ours["train_seconds"], 1e-9)
+            per_step = "imagined_steps_per_real_step"
             findings.append(
                 f"Training with the ensemble learning degree on {data['env']}: "
-                f"{ens['mean']:.0f} ± {ens['sd'] or 0:.0f} episodes to threshold "
-                f"({ens['reached']}/{ens['runs']} reached) vs {m0['mean']:.0f} ± "
-                f"{m0['sd'] or 0:.0f} with M1 vs M0 ({test}); it imagines "
-                f"{ens['imagined_steps_per_real_step']:.2f} steps per real step (M1 vs M0: "
-                f"{m0['imagined_steps_per_real_step']:.2f}) at {cost:.1f}x the training time."
+                f"{trained['mean']:.0f} ± {trained['sd'] or 0:.0f} episodes to threshold "
+                f"({trained['reached']}/{trained['runs']} reached) vs {ours['mean']:.0f} ± "
+                f"{ours['sd'] or 0:.0f} with M1 vs M0 ({test}); it imagines "
+                f"{trained[per_step]:.2f} steps per real step (M1 vs M0: "
+                f"{ours[per_step]:.2f}) at {cost:.1f}x the training time."
             )
         findings.append(
             f"LD calibration at {last['episodes']:,} episodes: AUC of LD for high one-step error "
@@ -520,11 +521,17 @@ def calibration_section(data: dict | None) -> tuple[list[str], list[str]]:
     return lines, findings
 
 
-def _mann_whitney(x: list, y: list) -> str:
+def _p_value(x: list, y: list) -> float | None:
+    """Two-sided Mann-Whitney p over the values that are not None (None: too few)."""
     x, y = [v for v in x if v is not None], [v for v in y if v is not None]
     if len(x) < 2 or len(y) < 2:
-        return "too few runs to test"
-    return f"Mann-Whitney p = {stats.mannwhitneyu(x, y).pvalue:.2g}"
+        return None
+    return float(stats.mannwhitneyu(x, y).pvalue)
+
+
+def _mann_whitney(x: list, y: list) -> str:
+    p = _p_value(x, y)
+    return "too few runs to test" if p is None else f"Mann-Whitney p = {p:.2g}"
 
 
 def _pending_rows(table: dict) -> list[str]:
@@ -563,13 +570,14 @@ def table4_section(table: dict | None) -> tuple[list[str], list[str]]:
         if set(algos) != {"a2c-model", "ldn"}:
             continue
         model, ldn = algos["a2c-model"], algos["ldn"]
-        ours = ldn["mean"] > model["mean"]
-        test = _mann_whitney(ldn["final_moving_returns"], model["final_moving_returns"])
-        verdict = (
-            "the paper's direction (MBRL-LDN higher)"
-            if ours
-            else "NOT the paper's direction (the paper: MBRL-LDN higher)"
-        )
+        x, y = ldn["final_moving_returns"], model["final_moving_returns"]
+        p, test = _p_value(x, y), _mann_whitney(x, y)
+        if p is None or p >= 0.05:
+            verdict = "no significant difference (the paper: MBRL-LDN higher): NOT reproduced"
+        elif ldn["mean"] > model["mean"]:
+            verdict = "REPRODUCED (MBRL-LDN higher, as in the paper)"
+        else:
+            verdict = "NOT reproduced: A3C-Model higher (the paper: MBRL-LDN higher)"
         findings.append(
             f"Table 4, {env} ({ldn['episodes']:,} episodes): MBRL-LDN {ldn['mean']:.1f} vs "
             f"A3C-Model {model['mean']:.1f} final moving return ({test}; paper "
@@ -610,9 +618,17 @@ def table5_section(table: dict | None) -> tuple[list[str], list[str]]:
         ours = " < ".join(f"{algo_name(a)} ({means[a]:.0f})" for a in order)
         reached = ", ".join(f"{algo_name(a)} {r['reached']}/{r['runs']}" for a, r in algos.items())
         verdict = (
-            "the paper's direction (PPO2-LDN fewest)"
+            "REPRODUCED (PPO2-LDN fewest, as in the paper)"
             if order[0] == "ppo-ldn" and len(means) == len(algos)
-            else "NOT the paper's direction (the paper: PPO2-LDN fewest)"
+            else "NOT reproduced (the paper: PPO2-LDN fewest)"
+        )
+        final = {a: r["final_moving_return"]["mean"] for a, r in algos.items()}
+        unreached = [a for a, r in algos.items() if r["reached"] == 0]
+        unreached = (
+            "; never reached the top: "
+            + ", ".join(f"{algo_name(a)} (final moving return {final[a]:.0f})" for a in unreached)
+            if unreached
+            else ""
         )
         tests = "; ".join(
             f"PPO2-LDN vs {algo_name(a)}: "
@@ -620,9 +636,20 @@ def table5_section(table: dict | None) -> tuple[list[str], list[str]]:
             for a in ("ppo", "ppo-model")
             if a in algos and "ppo-ldn" in algos
         )
+        imagined = ", ".join(
+            f"{algo_name(a)} {r['imagined_steps_per_seed']:,.0f}"
+            + (
+                f" (mean LD {r['ld_mean_last_iterations']:.2f})"
+                if r.get("ld_mean_last_iterations") is not None and a.endswith("ldn")
+                else ""
+            )
+            for a, r in algos.items()
+            if r.get("imagined_steps_per_seed")
+        )
+        imagined = f" Imagined steps per seed: {imagined}." if imagined else ""
         findings.append(
-            f"Table 5, {env}: mean episodes to the top {ours} ({tests}). Reached: {reached}: "
-            f"{verdict}."
+            f"Table 5, {env}: mean episodes to the top {ours} ({tests}). Reached: "
+            f"{reached}{unreached}: {verdict}.{imagined}"
         )
     return lines, findings
 

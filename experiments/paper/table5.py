@@ -42,6 +42,17 @@ def episodes_to(history: dict[str, np.ndarray], level: float) -> list[int | None
     return out
 
 
+def imagination(history: dict[str, np.ndarray]) -> dict:
+    """Imagined steps per seed over the run and the mean LD of the last 10 iterations (None
+    for model-free runs)."""
+    if "ld_mean" not in history:
+        return {"imagined_steps_per_seed": 0.0, "ld_mean_last_iterations": None}
+    return {
+        "imagined_steps_per_seed": float(history["imagined_steps"][0, :, -1].mean()),
+        "ld_mean_last_iterations": float(np.nanmean(history["ld_mean"][0, :, -10:])),
+    }
+
+
 def rows(entries: list[dict]) -> list[dict]:
     histories = {
         (e["env"], e["algo"]): common.load_history(e["dir"])
@@ -69,6 +80,7 @@ def rows(entries: list[dict]) -> list[dict]:
                 final_moving_return=common.describe([r["final_moving_return"] for r in runs]),
                 eval_return=common.describe([r["eval_return"] for r in runs]),
                 env_steps_per_seed=common.env_steps_per_seed(entry["dir"]),
+                **imagination(histories[env, algo]),
                 train_seconds=entry["summary"]["train_seconds"],
                 compile_seconds=entry["summary"]["compile_seconds"],
             )
