@@ -13,12 +13,39 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 from jax.experimental import multihost_utils
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
 SEEDS_AXIS = "seeds"
+
+SHARDED_COMPILER_OPTIONS = {"xla_disable_hlo_passes": "spmd-cleanup"}
+"""XLA options for every program compiled with a mesh, so that it computes what the
+one-device program computes. XLA's SPMD partitioner ends with a cleanup pipeline (DCE, tuple
+simplification, CSE) that a one-device compile does not run; its CSE merges broadcasts before
+the first algebraic simplification, which then rewrites fewer `x / broadcast(c)` as
+`x * broadcast(1 / c)` (optax Adam's bias correction, means), and losses drift in the last
+bits from the first iteration. The passes after it (DCE and CSE included) run in both."""
+
+BITWISE_COMPILER_OPTIONS = {
+    "xla_cpu_experimental_ynn_fusion_type": "LIBRARY_FUSION_TYPE_INDIVIDUAL_DOT"
+}
+"""XLA options of `bitwise` programs, one device or many: YNNPACK keeps its matmuls but no
+longer fuses reductions (jaxlib 0.10.2's default is dots and reductions), whose rounding
+depends on the `[K, S]` batch a device holds (with K > 1: 4 seeds on one device and 2 + 2 on
+two differ from the first iteration)."""
+
+
+def compiler_options(mesh: Mesh | None, bitwise: bool) -> dict | None:
+    """The XLA options of a program over the seeds, on one device (no mesh) or a mesh."""
+    options = {}
+    if mesh is not None:
+        options |= SHARDED_COMPILER_OPTIONS
+    if bitwise:
+        options |= BITWISE_COMPILER_OPTIONS
+    return options or None
 
 
 def seed_mesh(devices: int | None = None) -> Mesh:
@@ -47,14 +74,16 @@ def batch_sharding(mesh: Mesh) -> NamedSharding:
     return NamedSharding(mesh, P(None, SEEDS_AXIS))
 
 
-def shard_seeds(fn: Callable, mesh: Mesh) -> Callable:
+def shard_seeds(fn: Callable, mesh: Mesh, bitwise: bool = False) -> Callable:
     """`fn(batch, shared) -> out` run by each device on its block of seeds.
 
     `batch` and every leaf of `out` are `[K, S, ...]`; `shared` (K values, a key) is given
     whole to every device. The body has no collectives, so nothing crosses devices.
+    With `bitwise`, a device whose block is a single seed computes it twice (see
+    `_never_one_seed`), so that it runs the kernels of a batch of seeds.
     """
     return jax.shard_map(
-        fn,
+        _never_one_seed(fn) if bitwise else fn,
         mesh=mesh,
         in_specs=(P(None, SEEDS_AXIS), P()),
         out_specs=P(None, SEEDS_AXIS),
@@ -62,6 +91,24 @@ def shard_seeds(fn: Callable, mesh: Mesh) -> Callable:
         # per-seed values; the varying-axis check would demand a pcast at each of them.
         check_vma=False,
     )
+
+
+def _never_one_seed(fn: Callable) -> Callable:
+    """`fn` on a block of seeds, a one-seed block run as two copies of itself.
+
+    XLA drops size-1 dimensions, so a one-seed block compiles to other kernels than a batch
+    of seeds (with K = 1: unbatched matrix-vector products, emitted as XLA's own GEMV loops
+    rather than batched matmuls; with K > 1, other YNNPACK fusions), which round
+    differently. Two identical copies keep the batched program; the second is dropped.
+    """
+
+    def body(batch, shared):
+        if jax.tree.leaves(batch)[0].shape[1] > 1:
+            return fn(batch, shared)
+        twice = jax.tree.map(lambda x: jnp.concatenate([x, x], axis=1), batch)
+        return jax.tree.map(lambda x: x[:, :1], fn(twice, shared))
+
+    return body
 
 
 def place(batch, mesh: Mesh):

@@ -24,7 +24,7 @@ from ldn_jax.learners import LEARNERS
 from ldn_jax.learners.base import LearnerState
 from ldn_jax.learning_degree import ld_histogram
 from ldn_jax.rollout import Episodes, play_episodes
-from ldn_jax.sharding import shard_seeds
+from ldn_jax.sharding import compiler_options, shard_seeds
 
 Array = jax.Array
 
@@ -312,18 +312,27 @@ class Trainer:
     def k_values(self) -> Array:
         return jnp.asarray(self.config.k, jnp.float32)
 
-    def batched_chunk(self, mesh: Mesh | None = None):
+    def batched_chunk(self, mesh: Mesh | None = None, bitwise: bool = False):
         """`(states [K, S], k [K]) -> (states, metrics [K, S, N, ...])`, jitted.
 
         With a mesh, each of its devices runs its block of seeds (`ldn_jax.sharding`);
         states must then be placed with `sharding.place` and k with `sharding.replicate`.
+        `bitwise`: compiled so that the metrics do not depend on how the seeds are split
+        (`sharding.BITWISE_COMPILER_OPTIONS`; a device with one seed computes it twice).
         """
         per_seed = jax.vmap(self.train_chunk, in_axes=(0, None))
         chunk = jax.vmap(per_seed, in_axes=(0, 0))
-        return jax.jit(chunk if mesh is None else shard_seeds(chunk, mesh), donate_argnums=0)
+        return _jit_seeds(chunk, mesh, bitwise, donate_argnums=0)
 
-    def batched_evaluate(self, mesh: Mesh | None = None):
+    def batched_evaluate(self, mesh: Mesh | None = None, bitwise: bool = False):
         """`(states [K, S], key) -> eval returns [K, S]`, jitted (seeds split as above)."""
         per_seed = jax.vmap(self.evaluate, in_axes=(0, None))
         evaluate = jax.vmap(per_seed, in_axes=(0, None))
-        return jax.jit(evaluate if mesh is None else shard_seeds(evaluate, mesh))
+        return _jit_seeds(evaluate, mesh, bitwise)
+
+
+def _jit_seeds(fn, mesh: Mesh | None, bitwise: bool, **jit_kwargs):
+    """`fn` jitted on one device, or split over the mesh's devices, with the XLA options
+    of `sharding.compiler_options`."""
+    sharded = fn if mesh is None else shard_seeds(fn, mesh, bitwise)
+    return jax.jit(sharded, compiler_options=compiler_options(mesh, bitwise), **jit_kwargs)
