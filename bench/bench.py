@@ -89,6 +89,9 @@ def cartpole_env_steps(n_envs: int, auto_reset: bool, steps: int = 1000) -> dict
     }
 
 
+ALGOS = ("a2c", "a2c-model", "ldn", "ppo", "ppo-model", "ppo-ldn")
+
+
 def training(
     algo: str,
     seeds: int = 10,
@@ -277,12 +280,11 @@ def main() -> None:
             for n in ((1, 1024) if args.quick else (1, 64, 1024, 8192))
         ]
     if "train" in sections:
-        algos = ("a2c", "a2c-model", "ldn", "ppo", "ppo-model", "ppo-ldn")
         size = dict(seeds=2, episodes=160) if args.quick else {}
-        result["training"] = [training(algo, **size) for algo in algos]
+        result["training"] = [training(algo, **size) for algo in ALGOS]
         _add_overheads(result["training"])
     if "mujoco" in sections:
-        result["mujoco"] = mujoco_section()
+        result["mujoco"] = mujoco_section(args.quick)
     if "rejax" in sections:
         result["ppo_vs_rejax"] = ppo_vs_rejax(args.anchor_python)
     if "compile" in sections:
@@ -296,22 +298,33 @@ def main() -> None:
     Path(args.out).write_text(text + "\n")
 
 
-def mujoco_section() -> dict:
-    """MJX (and brax generalized) env steps/s at 64 envs, and ldn training steps/s, for
+MUJOCO_TRAIN = {
+    "inverted_pendulum": (ALGOS, {"seeds": 10, "episodes": 80}),
+    "halfcheetah": (("ldn",), {"seeds": 1, "episodes": 8}),
+}
+"""What the mujoco section trains: every algorithm on inverted_pendulum (10 seeds, 80
+episodes: early, short episodes), ldn on halfcheetah (one iteration of 8 x 1,000 steps)."""
+
+
+def mujoco_section(quick: bool = False) -> dict:
+    """MJX (and brax generalized) env steps/s at 64 envs, and training steps/s, for
     inverted_pendulum and halfcheetah: each in a fresh subprocess, so compiles do not pile up
-    in one process's memory."""
+    in one process's memory. `quick`: ldn only, 1 seed."""
     here = Path(__file__).resolve().parent
     rows: dict = {"env": [], "train": []}
-    for task in ("inverted_pendulum", "halfcheetah"):
+    for task, (algos, size) in MUJOCO_TRAIN.items():
         for backend in ("mjx", "generalized"):
             cmd = [sys.executable, str(here / "mujoco_envs.py"), "--task", task]
             rows["env"].append(_last_json([*cmd, "--backend", backend, "--envs", "64"]))
-        code = (
-            f"import json, sys; sys.path.insert(0, {str(here)!r}); from bench import training; "
-            f"print(json.dumps(training('ldn', seeds=1, episodes=8, env={task!r}, "
-            "chunk_iterations=1)))"
-        )
-        rows["train"].append(_last_json([sys.executable, "-c", code]))
+        if quick:
+            algos, size = ("ldn",), {"seeds": 1, "episodes": 8}
+        for algo in algos:
+            code = (
+                f"import json, sys; sys.path.insert(0, {str(here)!r}); from bench import "
+                f"training; print(json.dumps(training({algo!r}, env={task!r}, "
+                f"chunk_iterations=1, **{size!r})))"
+            )
+            rows["train"].append(_last_json([sys.executable, "-c", code]))
     return rows
 
 
