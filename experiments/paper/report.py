@@ -539,7 +539,8 @@ def _pending_rows(table: dict) -> list[str]:
     if not pending:
         return []
     names = sorted({r["env"] for r in pending}, key=[r["env"] for r in pending].index)
-    return [f"Pending at this scale ({pending[0]['reason']}): {', '.join(names)}.", ""]
+    reason = pending[0]["reason"].removeprefix(f"{pending[0]['env']} ")
+    return [f"Pending at this scale ({reason}): {', '.join(names)}.", ""]
 
 
 def table4_section(table: dict | None) -> tuple[list[str], list[str]]:
