@@ -23,9 +23,9 @@ MUJOCO_NAMES = tuple(mujoco.TASKS)
 
 
 def _mujoco(name: str) -> Callable[[], tuple[Any, Any]]:
-    # The paper's 1,000-step episodes through MJX; `params.replace(backend="generalized")`
-    # switches the physics pipeline.
-    return lambda: (mujoco.MujocoEnv(), mujoco.EnvParams(task=name, backend="mjx", max_steps=1000))
+    # The paper's 1,000-step episodes; the engine is picked by platform until
+    # `params.replace(backend=...)` names one.
+    return lambda: (mujoco.MujocoEnv(), mujoco.EnvParams(task=name, backend="auto", max_steps=1000))
 
 
 _REGISTRY: dict[str, Callable[[], tuple[Any, Any]]] = {

@@ -10,6 +10,7 @@ Writes config.json, metrics.jsonl, summary.json, curves.png and checkpoints/ int
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import hashlib
 import io
 import json
@@ -31,7 +32,6 @@ from experiments.plots import learning_curves
 from ldn_jax import checkpoint, sharding
 from ldn_jax.config import (
     ALGORITHMS,
-    BACKENDS,
     DEFAULT_CHUNK,
     DEFAULT_EPISODES,
     LD_ESTIMATORS,
@@ -78,7 +78,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="real episodes per seed and K (default 1600; inverted_pendulum 800, other MuJoCo "
         "tasks 16: CPU budgets, raise them on a GPU)",
     )
-    p.add_argument("--backend", help=f"MuJoCo physics: one of {', '.join(BACKENDS)} (default mjx)")
+    p.add_argument(
+        "--backend",
+        help="MuJoCo physics: native (MuJoCo's C engine, fast on CPU), mjx (for GPU/TPU) or "
+        "auto (default: native on CPU, mjx on GPU/TPU)",
+    )
     p.add_argument("--workers", type=int, help="synchronous workers (default 8)")
     p.add_argument("--preset", help=f"one of: {', '.join(PRESETS)} (default paper)")
     p.add_argument("--threshold", type=float, help="moving-return threshold")
@@ -246,9 +250,23 @@ def build_config(args: argparse.Namespace) -> Config:
     if args.ensemble_size is not None and args.ld != "ensemble":
         raise UsageError("--ensemble-size needs --ld ensemble")
     try:
-        return validate(from_preset(given("preset"), **overrides))
+        config = validate(from_preset(given("preset"), **overrides))
     except ValueError as error:
         raise UsageError(str(error)) from None
+    return resolve_physics(config)
+
+
+def resolve_physics(config: Config) -> Config:
+    """A MuJoCo run records the engine `auto` picked, and its model must load (one line
+    otherwise); other envs keep the config as it is."""
+    if config.env not in envs.mujoco.TASKS:
+        return config
+    backend = envs.mujoco.resolve_backend(config.backend)
+    try:
+        envs.mujoco.engine(config.env, backend)
+    except envs.mujoco.ModelError as error:
+        raise UsageError(f"--backend {backend}: {error}") from None
+    return dataclasses.replace(config, backend=backend)
 
 
 def _parse_k(text: str) -> tuple[float, ...]:
@@ -286,6 +304,8 @@ def check_resume_flags(args: argparse.Namespace, config: Config) -> None:
         if value is None:
             continue
         stored = _field(config, field)
+        if flag == "backend" and value == "auto" and config.env in envs.mujoco.TASKS:
+            value = envs.mujoco.resolve_backend(value)
         if flag == "k":
             value = _parse_k(value)
             stored = tuple(stored)
@@ -754,6 +774,7 @@ def summarize(config, history, eval_returns, states, session) -> dict:
     return {
         "env": config.env,
         "algo": config.algo,
+        "backend": config.backend,
         "threshold": threshold,
         "compile_seconds": round(session["compile_seconds"], 3),
         "train_seconds": round(train_seconds, 3),

@@ -12,6 +12,7 @@ import math
 from dataclasses import dataclass, field
 
 import envs
+from envs.mujoco import BACKEND_CHOICES
 
 ACTIVATIONS = ("linear", "relu", "relu6", "tanh")
 
@@ -145,9 +146,10 @@ class Config:
     """Real episodes per seed and K, summed over workers."""
     workers: int = 8
     """Synchronous workers (vmapped); one real and one imagined episode each per iteration."""
-    backend: str = "mjx"
-    """MuJoCo tasks: brax physics pipeline, "mjx" (the paper's MuJoCo, via MJX), or brax's
-    "generalized" / "positional" (faster on CPU; brax adapts some models). CartPole ignores it."""
+    backend: str = "auto"
+    """MuJoCo tasks: physics engine, "native" (MuJoCo's C engine, the fast one on CPU), "mjx"
+    (MJX, for GPU/TPU) or "auto" (native on CPU, mjx elsewhere; a run records what it
+    resolved to). CartPole ignores it."""
     threshold: float | None = None
     """Moving-return threshold for "episodes to threshold"; None: the env's paper value."""
     moving_decay: float = 0.99
@@ -215,7 +217,8 @@ linear nets need for 11- to 27-dimensional observations (our reading; the paper 
 
 CONTINUOUS_MODEL = {"normalize": True, "predict_delta": True, "env_reward": True}
 
-BACKENDS = ("mjx", "generalized", "positional")
+BACKENDS = BACKEND_CHOICES
+"""Values `Config.backend` takes (`envs.mujoco` owns the list)."""
 
 DEFAULT_EPISODES = {"inverted_pendulum": 800}
 """Budgets a CPU finishes in minutes, for envs whose paper-scale budget takes hours on CPU

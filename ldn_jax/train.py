@@ -81,7 +81,8 @@ class Trainer:
         self.config = config
         self.env, self.env_params = envs.make(config.env)
         if hasattr(self.env_params, "backend"):
-            self.env_params = self.env_params.replace(backend=config.backend)
+            backend = envs.mujoco.resolve_backend(config.backend)
+            self.env_params = self.env_params.replace(backend=backend)
         self.obs_size = self.env.observation_size(self.env_params)
         self.action_spec = self.env.action_spec(self.env_params)
         self.max_steps = self.env_params.max_steps

@@ -1,0 +1,200 @@
+"""The paper's six MuJoCo tasks as gymnasium v5 defines them, on either of two physics engines.
+
+One definition per task (`tasks.py`: model file, frame skip, reset, observation, reward and
+termination, written once in JAX over the physics state) runs on:
+- `native` (`native.py`): MuJoCo's C engine through `mujoco.rollout`, reached from the jitted
+  program by one batched host callback per env step. The fast path on CPUs.
+- `mjx` (`mjx.py`): MJX, MuJoCo in JAX. The path for GPUs and TPUs.
+`auto` picks `native` when JAX's default backend is the CPU and `mjx` otherwise.
+
+Both step gymnasium's own model files, so a policy trained here is evaluated in gymnasium on
+the task it learned. Episodes truncate at `EnvParams.max_steps` (the paper's 1,000);
+`truncated` is never true together with `terminated`. Each task is gymnasium's
+`Task.gymnasium_id` (`Ant-v5`, ...) with its default arguments:
+
+| task              | obs | layout                                         | act |
+|-------------------|-----|------------------------------------------------|-----|
+| ant               | 105 | qpos[2:] (13), qvel (14), clip(cfrc_ext[1:])   | 8   |
+| halfcheetah       | 17  | qpos[1:] (8), qvel (9)                         | 6   |
+| hopper            | 11  | qpos[1:] (5), clip(qvel, +-10) (6)             | 3   |
+| reacher           | 10  | cos, sin of 2 angles, target xy, 2 velocities, | 2   |
+|                   |     | fingertip - target xy                          |     |
+| walker2d          | 17  | qpos[1:] (8), clip(qvel, +-10) (9)             | 6   |
+| inverted_pendulum | 4   | cart x, pole angle, their velocities           | 1   |
+
+Actions are in [-1, 1] for every task and map linearly onto the actuators' control range
+(gymnasium's action space): the identity except inverted_pendulum, whose range is [-3, 3].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from envs.mujoco.model import ModelError
+from envs.mujoco.tasks import TASKS, Physics, Task
+
+Array = jax.Array
+
+BACKENDS = ("native", "mjx")
+"""Physics engines; `auto` resolves to one of them (`resolve_backend`)."""
+
+BACKEND_CHOICES = ("auto", *BACKENDS)
+
+
+def resolve_backend(backend: str) -> str:
+    """`auto` -> `native` on CPU, `mjx` on GPU/TPU; other names are checked and returned."""
+    if backend not in BACKEND_CHOICES:
+        raise ValueError(
+            f"unknown backend {backend!r}; valid backends: {', '.join(BACKEND_CHOICES)}"
+        )
+    if backend == "auto":
+        return "native" if jax.default_backend() == "cpu" else "mjx"
+    return backend
+
+
+def engine(task: str, backend: str):
+    """The engine stepping `task` on `backend`, built once per process. Raises ValueError (one
+    line) for an unknown task or backend, `ModelError` when mujoco cannot load the model."""
+    if task not in TASKS:
+        raise ValueError(f"unknown MuJoCo task {task!r}; valid tasks: {', '.join(TASKS)}")
+    backend = resolve_backend(backend)
+    if backend == "native":
+        from envs.mujoco import native
+
+        return native.engine(TASKS[task])
+    from envs.mujoco import mjx
+
+    return mjx.engine(TASKS[task])
+
+
+@struct.dataclass
+class EnvParams:
+    """Which task, on which engine, for how long. All static: one instance serves every
+    vmapped worker and seed, and each distinct value compiles its own program."""
+
+    task: str = struct.field(pytree_node=False, default="inverted_pendulum")
+    """One of `TASKS`."""
+    backend: str = struct.field(pytree_node=False, default="auto")
+    """One of `BACKEND_CHOICES`."""
+    max_steps: int = struct.field(pytree_node=False, default=1000)
+    """Episode step limit; reaching it truncates (never terminates) the episode."""
+
+
+@struct.dataclass
+class EnvState:
+    engine: Any
+    """The engine's state: native, MuJoCo's float64 full physics state as `uint32` bits;
+    mjx, MJX's `Data`."""
+    physics: Physics
+    """What the task read after the last step (the reward needs the step's start)."""
+    time: Array
+    """Steps taken in this episode, int32."""
+
+
+@dataclass(frozen=True)
+class ContinuousActions:
+    size: int
+    low: tuple[float, ...]
+    high: tuple[float, ...]
+    discrete: bool = False
+
+
+class MujocoEnv:
+    """Any of `TASKS` behind the `envs.base.Env` protocol; the task lives in `EnvParams`."""
+
+    def reset(self, key: Array, params: EnvParams) -> tuple[Array, EnvState]:
+        task, sim = TASKS[params.task], engine(params.task, params.backend)
+        qpos0 = jnp.asarray(_qpos0(params.task), jnp.float32)
+        qpos, qvel = task.reset(key, qpos0, _nv(params.task))
+        state, physics = sim.reset(qpos, qvel)
+        env_state = EnvState(engine=state, physics=physics, time=jnp.zeros((), jnp.int32))
+        return task.observation(physics), env_state
+
+    def step(
+        self, key: Array, state: EnvState, action: Array, params: EnvParams
+    ) -> tuple[Array, EnvState, Array, Array, Array, dict]:
+        del key  # deterministic physics
+        task, sim = TASKS[params.task], engine(params.task, params.backend)
+        ctrl = control(task, action)
+        engine_state, physics = sim.step(state.engine, ctrl)
+        reward = task.reward(state.physics, ctrl, physics, _dt(params.task))
+        terminated = task.terminated(physics)
+        time = state.time + 1
+        truncated = (time >= params.max_steps) & ~terminated
+        new_state = EnvState(engine=engine_state, physics=physics, time=time)
+        return (
+            task.observation(physics),
+            new_state,
+            reward.astype(jnp.float32),
+            terminated,
+            truncated,
+            {},
+        )
+
+    def is_terminal(self, obs: Array, params: EnvParams) -> Array:
+        return TASKS[params.task].is_terminal(obs)
+
+    def reward(self, obs: Array, action: Array, next_obs: Array, params: EnvParams) -> Array | None:
+        """Reward `[...]` of transitions `obs [..., O]`, `action [..., A]`, `next_obs [..., O]`
+        where the task's reward is an exact function of them; None otherwise (decided at
+        trace time from the static task)."""
+        task = TASKS[params.task]
+        if task.reward_from_obs is None:
+            return None
+        return task.reward_from_obs(obs, control(task, action), next_obs)
+
+    def observation_size(self, params: EnvParams) -> int:
+        return TASKS[params.task].obs_size
+
+    def action_spec(self, params: EnvParams) -> ContinuousActions:
+        size = TASKS[params.task].action_size
+        return ContinuousActions(size=size, low=(-1.0,) * size, high=(1.0,) * size)
+
+
+def control(task: Task, action: Array) -> Array:
+    """Our action in [-1, 1] -> the actuators' control (gymnasium's action)."""
+    low, high = task.ctrl_range
+    if (low, high) == (-1.0, 1.0):
+        return action
+    return low + (action + 1.0) * (0.5 * (high - low))
+
+
+def _model(task: str):
+    from envs.mujoco import model
+
+    return model.load(TASKS[task].asset)
+
+
+def _qpos0(task: str):
+    return _model(task).qpos0
+
+
+def _nv(task: str) -> int:
+    return _model(task).nv
+
+
+def _dt(task: str) -> float:
+    """Seconds per env step, as gymnasium's `env.dt` (model timestep x frame skip)."""
+    return float(_model(task).opt.timestep) * TASKS[task].frame_skip
+
+
+__all__ = [
+    "BACKENDS",
+    "BACKEND_CHOICES",
+    "TASKS",
+    "ContinuousActions",
+    "EnvParams",
+    "EnvState",
+    "ModelError",
+    "MujocoEnv",
+    "Physics",
+    "Task",
+    "control",
+    "engine",
+    "resolve_backend",
+]
