@@ -99,6 +99,7 @@ def training(
     env: str = "cartpole-v1",
     workers: int = 8,
     chunk_iterations: int = 5,
+    backend: str = "auto",
 ) -> dict:
     """Train from scratch (paper preset) and count real and imagined steps per wall second.
 
@@ -112,6 +113,7 @@ def training(
         episodes=episodes,
         workers=workers,
         chunk_iterations=chunk_iterations,
+        backend=backend,
     )
     trainer = Trainer(config)
     states, k = trainer.init_batch(), trainer.k_values()
@@ -128,6 +130,7 @@ def training(
     return {
         "algo": algo,
         "env": env,
+        "backend": trainer.env_params.backend if env in envs.mujoco.TASKS else None,
         "seeds": seeds,
         "workers": workers,
         "env_steps": env_steps,
@@ -257,6 +260,11 @@ def main() -> None:
         ),
         help="python of the anchors' venv (shared/anchors/README.md), for side-by-side rows",
     )
+    parser.add_argument(
+        "--brax-python",
+        default=os.environ.get("BRAX_PYTHON"),
+        help="a python with brax 0.14, for the mujoco section's brax-generalized rows",
+    )
     parser.add_argument("--probe", metavar="CACHE", help=argparse.SUPPRESS)
     parser.add_argument("--probe-shape", default="10x3", help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -284,7 +292,7 @@ def main() -> None:
         result["training"] = [training(algo, **size) for algo in ALGOS]
         _add_overheads(result["training"])
     if "mujoco" in sections:
-        result["mujoco"] = mujoco_section(args.quick)
+        result["mujoco"] = mujoco_section(args.quick, args.brax_python)
     if "rejax" in sections:
         result["ppo_vs_rejax"] = ppo_vs_rejax(args.anchor_python)
     if "compile" in sections:
@@ -299,33 +307,93 @@ def main() -> None:
 
 
 MUJOCO_TRAIN = {
-    "inverted_pendulum": (ALGOS, {"seeds": 10, "episodes": 80}),
-    "halfcheetah": (("ldn",), {"seeds": 1, "episodes": 8}),
+    "inverted_pendulum": (ALGOS, {"seeds": 10, "episodes": 80}, ("native",)),
+    "halfcheetah": (("ppo", "ldn"), {"seeds": 10, "episodes": 8}, ("native", "mjx")),
 }
 """What the mujoco section trains: every algorithm on inverted_pendulum (10 seeds, 80
-episodes: early, short episodes), ldn on halfcheetah (one iteration of 8 x 1,000 steps)."""
+episodes: early, short episodes), ppo and ldn on halfcheetah on both engines (10 seeds, one
+iteration of 8 x 1,000 steps each)."""
+
+MUJOCO_ENV_TASKS = ("halfcheetah", "inverted_pendulum", "ant")
+MUJOCO_ENV_SIZES = (8, 80, 640)
+MUJOCO_ENV_STEPS = {"native": 100, "rollout": 100, "mjx": 20, "generalized": 20}
+"""Steps per timed call: MJX is 10-50x slower on CPU, so it takes fewer to keep the section
+within minutes; rates are per env step either way."""
 
 
-def mujoco_section(quick: bool = False) -> dict:
-    """MJX (and brax generalized) env steps/s at 64 envs, and training steps/s, for
-    inverted_pendulum and halfcheetah: each in a fresh subprocess, so compiles do not pile up
-    in one process's memory. `quick`: ldn only, 1 seed."""
+def mujoco_section(quick: bool = False, brax_python: str | None = None) -> dict:
+    """Raw env steps/s per physics path at 8 / 80 / 640 envs (native, `mujoco.rollout` from
+    numpy, mjx, brax generalized when `brax_python` has brax), gymnasium's single env, how far
+    native and mjx drift apart (`mujoco_drift.py`), and training steps/s: each in a fresh
+    subprocess, so compiles do not pile up in one process's memory. `quick`: native and
+    rollout on halfcheetah at 80 envs, ldn on inverted_pendulum."""
     here = Path(__file__).resolve().parent
-    rows: dict = {"env": [], "train": []}
-    for task, (algos, size) in MUJOCO_TRAIN.items():
-        for backend in ("mjx", "generalized"):
-            cmd = [sys.executable, str(here / "mujoco_envs.py"), "--task", task]
-            rows["env"].append(_last_json([*cmd, "--backend", backend, "--envs", "64"]))
+    rows: dict = {"env": [], "train": [], "ratios": []}
+    tasks, sizes = (("halfcheetah",), (80,)) if quick else (MUJOCO_ENV_TASKS, MUJOCO_ENV_SIZES)
+    backends = ("native", "rollout") if quick else ("native", "rollout", "mjx", "generalized")
+    for task in tasks:
+        cmd = [str(here / "mujoco_envs.py"), "--task", task]
+        rows["env"].append(
+            _last_json([sys.executable, *cmd, "--backend", "gymnasium", "--steps", "2000"])
+        )
+        for n in sizes:
+            rates = {}
+            for backend in backends:
+                python = sys.executable
+                if backend == "generalized":
+                    if not (brax_python and Path(brax_python).exists()):
+                        rates[backend] = None
+                        continue
+                    python = brax_python
+                steps = str(MUJOCO_ENV_STEPS[backend])
+                row = _last_json(
+                    [python, *cmd, "--backend", backend, "--envs", str(n), "--steps", steps]
+                )
+                rows["env"].append(row)
+                rates[backend] = row.get("env_steps_per_second")
+            rows["ratios"].append({"task": task, "envs": n, **_ratios(rates)})
+    if brax_python is None or not Path(brax_python).exists():
+        rows["generalized"] = "not measured: brax is not a dependency; give --brax-python"
+    if not quick:
+        drift = [sys.executable, str(here / "mujoco_drift.py"), "--task"]
+        rows["drift"] = [_last_json([*drift, task]) for task in envs.mujoco.TASKS]
+    for task, (algos, size, engines) in MUJOCO_TRAIN.items():
         if quick:
+            if task != "inverted_pendulum":
+                continue
             algos, size = ("ldn",), {"seeds": 1, "episodes": 8}
-        for algo in algos:
-            code = (
-                f"import json, sys; sys.path.insert(0, {str(here)!r}); from bench import "
-                f"training; print(json.dumps(training({algo!r}, env={task!r}, "
-                f"chunk_iterations=1, **{size!r})))"
-            )
-            rows["train"].append(_last_json([sys.executable, "-c", code]))
+        for backend in engines:
+            for algo in algos:
+                code = (
+                    f"import json, sys; sys.path.insert(0, {str(here)!r}); from bench import "
+                    f"training; print(json.dumps(training({algo!r}, env={task!r}, "
+                    f"chunk_iterations=1, backend={backend!r}, **{size!r})))"
+                )
+                rows["train"].append(_last_json([sys.executable, "-c", code]))
+    rows["train_ratios"] = _train_ratios(rows["train"])
     return rows
+
+
+def _ratios(rates: dict) -> dict:
+    out = {}
+    if rates.get("native") and rates.get("mjx"):
+        out["native_over_mjx"] = round(rates["native"] / rates["mjx"], 1)
+    if rates.get("native") and rates.get("generalized"):
+        out["native_over_generalized"] = round(rates["native"] / rates["generalized"], 1)
+    if rates.get("native") and rates.get("rollout"):
+        out["rollout_over_native"] = round(rates["rollout"] / rates["native"], 2)
+    return out
+
+
+def _train_ratios(rows: list[dict]) -> list[dict]:
+    """Training env steps/s native over mjx, per (env, algo) trained on both."""
+    rate = {(r.get("env"), r.get("algo"), r.get("backend")): r.get("env_steps_per_s") for r in rows}
+    out = []
+    for (env, algo, backend), native in rate.items():
+        mjx = rate.get((env, algo, "mjx"))
+        if backend == "native" and native and mjx:
+            out.append({"env": env, "algo": algo, "native_over_mjx": round(native / mjx, 1)})
+    return out
 
 
 def _last_json(cmd: list[str]) -> dict:

@@ -17,15 +17,11 @@ from gymnasium.envs.classic_control.cartpole import CartPoleEnv
 from gymnasium.wrappers import RecordVideo, RescaleAction, TimeLimit
 
 import envs
+from envs.mujoco.model import settotalmass_ignored
 
 GYMNASIUM_IDS = {
     "cartpole-v1": "CartPole-v1",
-    "ant": "Ant-v5",
-    "halfcheetah": "HalfCheetah-v5",
-    "hopper": "Hopper-v5",
-    "reacher": "Reacher-v5",
-    "walker2d": "Walker2d-v5",
-    "inverted_pendulum": "InvertedPendulum-v5",
+    **{name: task.gymnasium_id for name, task in envs.mujoco.TASKS.items()},
 }
 """Our env names whose gymnasium registration is the same task as ours."""
 
@@ -69,10 +65,11 @@ def make_env(env: str, render_mode: str | None = None) -> gymnasium.Env:
         base = ForceTable(CartPoleEnv(render_mode=render_mode), params.forces)
         return TimeLimit(base, max_episode_steps=params.max_steps)
     if env in GYMNASIUM_IDS:
-        made = gymnasium.make(GYMNASIUM_IDS[env], render_mode=render_mode)
+        with settotalmass_ignored():  # HalfCheetah-v5's model warns on every compile
+            made = gymnasium.make(GYMNASIUM_IDS[env], render_mode=render_mode)
         ours, params = envs.make(env)
         spec = ours.action_spec(params)
-        if not spec.discrete:  # our bounds (brax: [-1, 1]) onto gymnasium's (e.g. [-3, 3])
+        if not spec.discrete:  # our bounds ([-1, 1]) onto gymnasium's (e.g. [-3, 3])
             made = RescaleAction(made, np.asarray(spec.low), np.asarray(spec.high))
         return made
     valid = ", ".join(sorted({*GYMNASIUM_IDS, *CUSTOM_CARTPOLES}))

@@ -77,6 +77,7 @@ def test_load_policy_returns_python_ints(run_dir):
         (["--ld", "bayes"], "argument --ld: invalid choice: 'bayes'"),
         (["--ld", "ensemble", "--ensemble-size", "1"], "ensemble size must be >= 2, got 1"),
         (["--ensemble-size", "3"], "--ensemble-size needs --ld ensemble"),
+        (["--env", "hopper", "--backend", "warp"], "backend must be one of auto, native, mjx"),
     ],
 )
 def test_bad_input_exits_2_with_one_line(args, needle):
@@ -102,3 +103,28 @@ def test_ppo_ldn_run_logs_ppo_losses(tmp_path):
     for name in ("real_actor_loss", "real_approx_kl", "imagined_clip_fraction", "model_loss"):
         assert name in line["losses"], line["losses"]
     assert line["imagined_steps"] > 0
+
+
+def test_auto_backend_is_recorded_as_what_it_resolved_to():
+    from experiments import run
+
+    config = run.build_config(run.parse_args(["--env", "hopper"]))
+    assert config.backend == "native"  # a CPU machine
+    assert (
+        run.build_config(run.parse_args(["--env", "hopper", "--backend", "mjx"])).backend == "mjx"
+    )
+    assert run.build_config(run.parse_args([])).backend == "auto"  # CartPole has no engine
+
+
+def test_a_model_mujoco_cannot_load_exits_2_with_one_line(tmp_path):
+    (tmp_path / "hopper.xml").write_text("<mujoco><worldbody>")
+    code = (
+        "import sys\n"
+        "from envs.mujoco import model\n"
+        f"model.asset_path = lambda asset: {str(tmp_path)!r} + '/' + asset\n"
+        "from experiments import run\n"
+        "sys.exit(run.main(['--env', 'hopper', '--backend', 'native', '--quiet']))\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.count("\n") == 1 and "cannot load" in result.stderr, result.stderr

@@ -5,6 +5,7 @@ The native engine compiles in about a second, so its tests run in the default su
 compiles slowly on CPU, so only inverted_pendulum compiles an MJX program by default.
 """
 
+import dataclasses
 import functools
 import subprocess
 import sys
@@ -64,10 +65,10 @@ def _parity(task: str) -> dict:
     unwrapped env does not stop), and both truncate at 200 steps."""
     t = TASKS[task]
     env, params = _params(task, max_steps=PARITY_STEPS)
-    g = gymnasium.make(t.gymnasium_id, max_episode_steps=PARITY_STEPS)
+    with model.settotalmass_ignored():
+        g = gymnasium.make(t.gymnasium_id, max_episode_steps=PARITY_STEPS)
     gym_obs, _ = g.reset(seed=3)
     engine = native.engine(t)
-    obs, state = env.reset(jax.random.key(0), params)  # for the Physics of the same state
     bits = engine.from_state(_gym_state(g))
     qpos, qvel = g.unwrapped.data.qpos, g.unwrapped.data.qvel
     _, physics = engine.reset(jnp.asarray(qpos, jnp.float32), jnp.asarray(qvel, jnp.float32))
@@ -82,7 +83,9 @@ def _parity(task: str) -> dict:
         g.unwrapped.data.qacc_warmstart[:] = 0.0
         ctrl = np.asarray(control(t, jnp.asarray(action)), np.float64)
         out = g.step(ctrl)
-        for name, ours, theirs in zip(rows, (obs, reward, terminated, truncated), out[:4]):
+        for name, ours, theirs in zip(
+            rows, (obs, reward, terminated, truncated), out[:4], strict=True
+        ):
             rows[name].append(np.asarray(ours))
             gym[name].append(np.asarray(theirs))
         states.append((engine.full_state(state.engine), _gym_state(g)))
@@ -129,7 +132,8 @@ def test_sizes_and_control_ranges_match_the_models(task):
     np.testing.assert_array_equal(m.actuator_ctrlrange, [TASKS[task].ctrl_range] * m.nu)
     obs, _ = env.reset(jax.random.key(0), params)
     assert obs.shape == (obs_size,) and obs.dtype == jnp.float32
-    g = gymnasium.make(TASKS[task].gymnasium_id)
+    with model.settotalmass_ignored():
+        g = gymnasium.make(TASKS[task].gymnasium_id)
     assert g.observation_space.shape == (obs_size,)
 
 
@@ -183,7 +187,7 @@ def test_native_vmapped_equals_looped():
     actions = jnp.asarray(_grid_actions(np.random.default_rng(1), 6 * 10, 6).reshape(6, 10, 6))
 
     def play(key, actions):
-        obs, state = env.reset(key, params)
+        _, state = env.reset(key, params)
 
         def body(state, action):
             obs, state, reward, *_ = env.step(None, state, action, params)
@@ -194,7 +198,7 @@ def test_native_vmapped_equals_looped():
     batched = jax.jit(jax.vmap(jax.vmap(play)))(keys.reshape(2, 3), actions.reshape(2, 3, 10, 6))
     for i in range(6):
         looped = jax.jit(play)(keys[i], actions[i])
-        for mine, theirs in zip(looped, batched):
+        for mine, theirs in zip(looped, batched, strict=True):
             np.testing.assert_array_equal(np.asarray(mine), np.asarray(theirs)[i // 3, i % 3])
 
 
@@ -312,3 +316,31 @@ def test_a_mujoco_run_prints_no_library_noise():
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     assert done.stdout == "" and done.stderr == "", (done.stdout, done.stderr)
+
+
+# -- a native training run ---------------------------------------------------------------------
+
+
+def test_native_run_resumes_to_the_bit(tmp_path):
+    """ldn on inverted_pendulum through the native engine, interrupted after 2 of 4 chunks and
+    resumed: every metrics line and the final history equal the uninterrupted run's."""
+    from experiments.run import Interrupted, read_run_config, train
+    from ldn_jax.config import from_preset
+    from tests.test_resume import StopAfter, _lines
+
+    config = from_preset(
+        "paper", env="inverted_pendulum", algo="ldn", seeds=2, episodes=8, workers=2
+    )
+    config = dataclasses.replace(config, chunk_iterations=1, backend="native")
+    reference, resumed = tmp_path / "reference", tmp_path / "resumed"
+    reference.mkdir(), resumed.mkdir()
+    summary = train(config, reference, 1, quiet=True)
+    assert summary["backend"] == "native" and summary["imagined_steps"] > 0
+    with pytest.raises(Interrupted):
+        train(config, resumed, 1, quiet=True, stop=StopAfter(2))
+    assert len(_lines(resumed)) == 2 * 2
+    assert read_run_config(resumed).backend == "native"
+    train(read_run_config(resumed), resumed, 1, quiet=True, resume=True)
+    assert _lines(resumed) == _lines(reference)
+    final = lambda run: np.load(run / "checkpoints" / "final.host.npz")["history/moving_after"]
+    np.testing.assert_array_equal(final(resumed), final(reference))

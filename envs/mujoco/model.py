@@ -6,9 +6,11 @@ gymnasium's `envs/mujoco/assets`), so a policy trained here is evaluated on the 
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
 import re
+import sys
 
 import mujoco
 import numpy as np
@@ -65,3 +67,21 @@ def body_ids(model: mujoco.MjModel, names: tuple[str, ...]) -> np.ndarray:
     """Body indices of `names` in `model` (int32 `[len(names)]`)."""
     ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name) for name in names]
     return np.asarray(ids, np.int32)
+
+
+@contextlib.contextmanager
+def settotalmass_ignored():
+    """While open, MuJoCo's warning about half_cheetah.xml's deprecated `settotalmass` is
+    dropped; every other warning still goes to stderr. For code that compiles gymnasium's
+    model itself (gymnasium's HalfCheetah-v5); `load` avoids the warning instead."""
+    previous = mujoco.get_mju_user_warning()
+
+    def handler(message: str) -> None:
+        if "settotalmass" not in message:
+            print(f"WARNING: {message}", file=sys.stderr)
+
+    mujoco.set_mju_user_warning(handler)
+    try:
+        yield
+    finally:
+        mujoco.set_mju_user_warning(previous)
