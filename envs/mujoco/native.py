@@ -24,6 +24,7 @@ from __future__ import annotations
 import functools
 import os
 import threading
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import jax
@@ -53,11 +54,14 @@ class _Pool:
 
     rollout: mj_rollout.Rollout
     lock: threading.Lock
+    executor: ThreadPoolExecutor
+    """For the per-env work outside `mujoco.rollout` (MuJoCo's calls release the GIL)."""
 
 
 @functools.cache
 def _pool() -> _Pool:
-    return _Pool(mj_rollout.Rollout(nthread=threads()), threading.Lock())
+    n = threads()
+    return _Pool(mj_rollout.Rollout(nthread=n), threading.Lock(), ThreadPoolExecutor(n))
 
 
 def _to_bits(state: np.ndarray) -> np.ndarray:
@@ -157,16 +161,21 @@ class NativeEngine:
         cfrc = np.zeros((n, self.ncfrc, 6))
         if not (len(self.body_ids) or self.ncfrc):
             return xpos, cfrc
-        d, m = self.scratch, self.model
-        for i in range(n):
-            mujoco.mj_setState(m, d, before_last[i], self.spec)
-            d.qacc_warmstart[:] = 0.0
-            d.ctrl[:] = ctrl[i]
-            mujoco.mj_step(m, d)
-            xpos[i] = d.xpos[self.body_ids]
-            if self.ncfrc:
-                mujoco.mj_rnePostConstraint(m, d)
-                cfrc[i] = d.cfrc_ext
+        m = self.model
+
+        def restep(part: int) -> None:
+            d = self.datas[part]
+            for i in range(part, n, len(self.datas)):
+                mujoco.mj_setState(m, d, before_last[i], self.spec)
+                d.qacc_warmstart[:] = 0.0
+                d.ctrl[:] = ctrl[i]
+                mujoco.mj_step(m, d)
+                xpos[i] = d.xpos[self.body_ids]
+                if self.ncfrc:
+                    mujoco.mj_rnePostConstraint(m, d)
+                    cfrc[i] = d.cfrc_ext
+
+        list(_pool().executor.map(restep, range(min(n, len(self.datas)))))
         return xpos, cfrc
 
     # -- JAX side --------------------------------------------------------------------------
