@@ -346,9 +346,8 @@ def mujoco_section(quick: bool = False, brax_python: str | None = None) -> dict:
                         continue
                     python = brax_python
                 steps = str(MUJOCO_ENV_STEPS[backend])
-                row = _last_json(
-                    [python, *cmd, "--backend", backend, "--envs", str(n), "--steps", steps]
-                )
+                args = [python, *cmd, "--backend", backend, "--envs", str(n), "--steps", steps]
+                row = _last_json(args, timeout=300)
                 rows["env"].append(row)
                 rates[backend] = row.get("env_steps_per_second")
             rows["ratios"].append({"task": task, "envs": n, **_ratios(rates)})
@@ -396,10 +395,14 @@ def _train_ratios(rows: list[dict]) -> list[dict]:
     return out
 
 
-def _last_json(cmd: list[str]) -> dict:
-    done = subprocess.run(cmd, capture_output=True, text=True)
+def _last_json(cmd: list[str], timeout: float = 600) -> dict:
+    """The last stdout line of `cmd` as JSON; a failure or a timeout is reported as a row."""
+    try:
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return {"cmd": " ".join(cmd[1:]), "failed": f"timed out after {timeout:.0f} s"}
     if done.returncode != 0:
-        return {"cmd": " ".join(cmd[1:3]), "failed": done.stderr.strip().splitlines()[-1:]}
+        return {"cmd": " ".join(cmd[1:]), "failed": done.stderr.strip().splitlines()[-1:]}
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
