@@ -59,10 +59,6 @@ def state_size(model: mujoco.MjModel) -> int:
     return mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_FULLPHYSICS)
 
 
-def init_qpos(model: mujoco.MjModel) -> np.ndarray:
-    return np.asarray(model.qpos0, np.float64).copy()
-
-
 def body_ids(model: mujoco.MjModel, names: tuple[str, ...]) -> np.ndarray:
     """Body indices of `names` in `model` (int32 `[len(names)]`)."""
     ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name) for name in names]

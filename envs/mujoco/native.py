@@ -14,9 +14,9 @@ persistent pool with one thread per core.
 MuJoCo's constraint solver warm-starts from the previous substep's accelerations. That warm
 start is solver state, not physics state; `mujoco.rollout` neither takes it from nor returns
 it to the caller per env, so each env step starts the solver cold (within a step the substeps
-warm-start as usual). One step then differs from gymnasium's warm-started one by solver
-tolerance (measured: at most 2e-13 in the state); gymnasium stepped with its warm start cleared
-before each step equals this engine to the bit.
+warm-start as usual). One step then differs from gymnasium's warm-started one at the solver's
+tolerance (about 1e-13 in the state); gymnasium stepped with its warm start cleared before
+each step equals this engine to the bit.
 """
 
 from __future__ import annotations
