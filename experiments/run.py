@@ -10,6 +10,7 @@ Writes config.json, metrics.jsonl, summary.json, curves.png and checkpoints/ int
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import hashlib
 import io
@@ -29,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import envs
 from experiments.loggers import LOGGERS, Logger, NullLogger, make_logger
 from experiments.plots import learning_curves
-from ldn_jax import checkpoint, sharding
+from ldn_jax import checkpoint, run_dir, sharding
 from ldn_jax.config import (
     ALGORITHMS,
     DEFAULT_CHUNK,
@@ -320,11 +321,13 @@ def check_resume_flags(args: argparse.Namespace, config: Config) -> None:
         raise UsageError("--out and --resume name different directories; give --resume alone")
 
 
-def prepare_out(args: argparse.Namespace, config: Config) -> Path:
+def prepare_out(
+    args: argparse.Namespace, config: Config, held: contextlib.ExitStack | None = None
+) -> Path:
+    """Create the run directory for a new run; with `held`, take its lock into `held` before
+    checking that no run is there (so two processes cannot both start one)."""
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out = Path(args.out) if args.out else Path("runs") / f"{config.env}-{config.algo}-{stamp}"
-    if (out / "config.json").exists():
-        raise UsageError(f"{out} already holds a run; choose another --out or --resume {out}")
     try:
         out.mkdir(parents=True, exist_ok=True)
         probe = out / ".write-test"
@@ -332,7 +335,18 @@ def prepare_out(args: argparse.Namespace, config: Config) -> Path:
         probe.unlink()
     except OSError as error:
         raise UsageError(f"cannot write to --out {out}: {error.strerror or error}") from None
+    if held is not None:
+        _hold(held, out)
+    if (out / "config.json").exists():
+        raise UsageError(f"{out} already holds a run; choose another --out or --resume {out}")
     return out
+
+
+def _hold(held: contextlib.ExitStack, out: Path) -> None:
+    try:
+        held.enter_context(run_dir.hold(out))
+    except run_dir.RunDirBusy as error:
+        raise UsageError(str(error)) from None
 
 
 def write_json(path: Path, data: dict) -> None:
@@ -798,13 +812,17 @@ def plot(config: Config, history: dict, path: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    held = contextlib.ExitStack()  # the run directory's lock, for the life of the process
     try:
         args = parse_args(argv)
         if args.distributed:
             _initialize_distributed(args)
+        writer = jax.process_index() == 0
         cache = enable_compile_cache(args.compile_cache)
         if args.resume:
             out = Path(args.resume)
+            if writer and out.is_dir() and not args.dry_run:
+                _hold(held, out)
             config = read_run_config(out)
             check_resume_flags(args, config)
         else:
@@ -813,9 +831,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.dry_run:
             dry_run(config, mesh, cache, bool(args.bitwise))
             return 0
-        writer = jax.process_index() == 0
         if not args.resume:
-            out = prepare_out(args, config) if writer else Path(args.out)
+            out = prepare_out(args, config, held) if writer else Path(args.out)
         try:
             logger = make_logger(args.logger, out) if writer else NullLogger()
         except ValueError as error:
@@ -842,6 +859,8 @@ def main(argv: list[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 128 + stopped.signum
+    finally:
+        held.close()
     if not writer:
         return 0
     reached = [r for r in summary["runs"] if r["episodes_to_threshold"] is not None]

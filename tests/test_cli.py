@@ -128,3 +128,34 @@ def test_a_model_mujoco_cannot_load_exits_2_with_one_line(tmp_path):
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
     assert result.returncode == 2, result.stderr
     assert result.stderr.count("\n") == 1 and "cannot load" in result.stderr, result.stderr
+
+
+def test_a_held_run_directory_is_refused_and_a_killed_holder_leaves_no_lock(run_dir, tmp_path):
+    import os
+    import signal
+
+    from ldn_jax import run_dir as run_dirs
+
+    with run_dirs.hold(run_dir):
+        result = _run("--resume", str(run_dir), timeout=60)
+        assert result.returncode == 2 and result.stderr.count("\n") == 1, result.stderr
+        assert f"in use by another training process (pid {os.getpid()})" in result.stderr
+        # another open of the lock, same process
+        with pytest.raises(run_dirs.RunDirBusy), run_dirs.hold(run_dir):
+            pass
+    fresh = tmp_path / "fresh"
+    fresh.mkdir()
+    code = (
+        "import sys, time; from pathlib import Path; from ldn_jax import run_dir\n"
+        f"with run_dir.hold(Path({str(fresh)!r})):\n"
+        "    print('held', flush=True); time.sleep(60)\n"
+    )
+    holder = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    assert holder.stdout.readline().strip() == "held"
+    result = _run("--env", "cartpole-v0", "--out", str(fresh), timeout=60)
+    assert result.returncode == 2 and "in use by another training process" in result.stderr
+    assert not (fresh / "config.json").exists()
+    holder.send_signal(signal.SIGKILL)
+    holder.wait()
+    with run_dirs.hold(fresh):  # the lock died with its process
+        pass
