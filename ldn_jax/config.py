@@ -274,7 +274,14 @@ def validate(config: Config) -> Config:
     checks = [
         (config.seeds >= 1, f"seeds must be >= 1, got {config.seeds}"),
         (len(config.k) >= 1, "k needs at least one value"),
-        (all(k > 0 and math.isfinite(k) for k in config.k), f"every K must be > 0: {config.k}"),
+        (
+            all(k > 0 and math.isfinite(k) for k in config.k),
+            f"every K must be > 0 and finite: {config.k}",
+        ),
+        (
+            config.threshold is None or math.isfinite(config.threshold),
+            f"threshold must be a finite number, got {config.threshold}",
+        ),
         (len(set(config.k)) == len(config.k), f"K values must be distinct: {config.k}"),
         (config.episodes >= 1, f"episodes must be >= 1, got {config.episodes}"),
         (config.workers >= 1, f"workers must be >= 1, got {config.workers}"),

@@ -71,6 +71,8 @@ def test_load_policy_returns_python_ints(run_dir):
         (["--algo", "dqn"], "unknown algo 'dqn'"),
         (["--k", "0,1"], "every K must be > 0"),
         (["--k", "-1"], "every K must be > 0"),
+        (["--k", "1,inf"], "every K must be > 0 and finite"),
+        (["--threshold", "nan"], "threshold must be a finite number, got nan"),
         (["--seeds", "0"], "seeds must be >= 1"),
         (["--seeds", "two"], "invalid int value"),
         (["--out", "/proc/forbidden/run"], "cannot write to --out"),
