@@ -29,7 +29,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import envs  # noqa: E402
-from experiments.run import compile_chunk, enable_compile_cache  # noqa: E402
+from experiments.runtime import compile_chunk, enable_compile_cache  # noqa: E402
 from ldn_jax.config import from_preset  # noqa: E402
 from ldn_jax.train import Trainer  # noqa: E402
 
@@ -110,6 +110,7 @@ def training(
         env=env,
         algo=algo,
         seeds=seeds,
+        k=(1.0,),
         episodes=episodes,
         workers=workers,
         chunk_iterations=chunk_iterations,

@@ -42,6 +42,21 @@ class Env(Protocol):
         """
         ...
 
+    def reward(self, obs: Array, action: Array, next_obs: Array, params: Any) -> Array | None:
+        """The reward `[...]` of transitions as a pure function of observations and actions
+        `[..., A]` (an imagined rollout can use it instead of the model's); None where the
+        observations do not determine it (see `exact_reward`)."""
+        ...
+
+    def exact_reward(self, params: Any) -> bool:
+        """Whether `reward` is exact for these params (known before tracing)."""
+        ...
+
+    def with_backend(self, params: Any, backend: str) -> Any:
+        """Params that step the physics on `backend` ("auto" picks by platform); an env
+        with a single engine returns `params` as they are."""
+        ...
+
     def observation_size(self, params: Any) -> int:
         """Length of the flat observation vector."""
         ...

@@ -103,6 +103,17 @@ class CartPole:
         del params
         return is_terminal(obs)
 
+    def reward(self, obs: Array, action: Array, next_obs: Array, params: EnvParams) -> Array:
+        del action, next_obs, params
+        return jnp.ones(obs.shape[:-1], jnp.float32)  # +1 per step, the last one included
+
+    def exact_reward(self, params: EnvParams) -> bool:
+        return True
+
+    def with_backend(self, params: EnvParams, backend: str) -> EnvParams:
+        del backend  # pure-JAX physics, one engine
+        return params
+
     def observation_size(self, params: EnvParams) -> int:
         return 4
 

@@ -10,7 +10,6 @@ Bad input gets a one-line error on stderr and exit code 2.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -18,16 +17,10 @@ import gymnasium
 import numpy as np
 
 from experiments import gym_eval, run
+from experiments.flags import Parser, UsageError
 from experiments.plots import compare_runs
-from experiments.run import UsageError, write_json
 from ldn_jax import load_policy
-from ldn_jax.config import Config
-from ldn_jax.policy import FINAL_CHECKPOINT
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str):  # one line, not usage + message
-        raise UsageError(message)
+from ldn_jax.run_dir import RunDir, RunDirError
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -43,7 +36,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def evaluate(argv: list[str]) -> int:
     """`ldn-jax eval`: a trained greedy policy in the gymnasium env; writes RUN_DIR/eval.json."""
-    p = _Parser(prog="ldn-jax eval", description=evaluate.__doc__)
+    p = Parser(prog="ldn-jax eval", description=evaluate.__doc__)
     p.add_argument("run_dir", type=Path, help="a finished run directory")
     p.add_argument("--seed", type=int, default=0, help="which trained seed (default 0)")
     p.add_argument("--k", type=float, default=None, help="which K (default: the run's first)")
@@ -69,11 +62,14 @@ def evaluate(argv: list[str]) -> int:
         "std_return": std,
         "returns": returns.tolist(),
     }
-    _record(args.run_dir / "eval.json", config.env, result)
+    run_dir = RunDir(args.run_dir)
+    header = {"env": config.env, "gymnasium": gym_eval.gymnasium_name(config.env)}
+    run_dir.record_eval(header, result)
+    which = f"seed {args.seed}" + (f" K={k:g}" if config.uses_k else "")
     print(
-        f"{config.env} {config.algo} seed {args.seed} K={k:g} in gymnasium "
+        f"{config.env} {config.algo} {which} in gymnasium "
         f"{gym_eval.gymnasium_name(config.env)}: return {mean:.1f} ± {std:.1f} (s.d.) "
-        f"over {args.episodes} episodes -> {args.run_dir / 'eval.json'}"
+        f"over {args.episodes} episodes -> {run_dir.eval_file}"
     )
     return 0
 
@@ -85,13 +81,12 @@ def _load(args: argparse.Namespace):
         raise UsageError(f"no such run directory: {run_dir}")
     if args.episodes < 1:
         raise UsageError(f"--episodes must be >= 1, got {args.episodes}")
+    run = RunDir(run_dir)
     try:
-        config = Config.from_dict(json.loads((run_dir / "config.json").read_text()))
-    except FileNotFoundError:
-        raise UsageError(f"{run_dir} is not a run directory: no config.json") from None
-    except (OSError, ValueError, TypeError) as error:
-        raise UsageError(f"{run_dir}/config.json is unreadable: {error}") from None
-    if not (run_dir / "checkpoints" / FINAL_CHECKPOINT).is_dir():
+        config = run.read_config()
+    except RunDirError as error:
+        raise UsageError(str(error)) from None
+    if not run.has_final_checkpoint():
         raise UsageError(f"{run_dir} has no final checkpoint (training not finished?)")
     act = load_policy(run_dir, args.seed, args.k)  # ValueError names the valid seeds / K
     k = config.k[0] if args.k is None else next(v for v in config.k if np.isclose(v, args.k))
@@ -114,21 +109,9 @@ def _episode_returns(env: gymnasium.Env, act, args: argparse.Namespace, k: float
         raise UsageError(f"--video failed: {message}") from None
 
 
-def _record(path: Path, env: str, result: dict) -> None:
-    """Add `result` to eval.json, replacing an earlier evaluation of the same seed and K."""
-    try:
-        runs = [r for r in json.loads(path.read_text())["runs"] if isinstance(r, dict)]
-    except (OSError, ValueError, KeyError, TypeError):
-        runs = []  # none yet, or unreadable: start afresh
-    key = (result["seed"], result["k"])
-    runs = [r for r in runs if (r.get("seed"), r.get("k")) != key]
-    data = {"env": env, "gymnasium": gym_eval.gymnasium_name(env), "runs": [*runs, result]}
-    write_json(path, data)
-
-
 def plot(argv: list[str]) -> int:
     """`ldn-jax plot`: overlay runs' moving return vs episodes (mean, 95% band over seeds)."""
-    p = _Parser(prog="ldn-jax plot", description=plot.__doc__)
+    p = Parser(prog="ldn-jax plot", description=plot.__doc__)
     p.add_argument("run_dirs", type=Path, nargs="+", metavar="RUN_DIR")
     p.add_argument("--out", type=Path, default=Path("comparison.png"), help="the PNG to write")
     try:

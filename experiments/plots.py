@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import matplotlib
@@ -11,8 +10,34 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from ldn_jax.config import ALGORITHMS, Config
+from ldn_jax.config import Config
 from ldn_jax.metrics import mean_band
+from ldn_jax.run_dir import RunDir
+
+
+def band_panel(
+    ax,
+    curves: dict[str, tuple[np.ndarray, np.ndarray]],
+    title: str | None = None,
+    level: float | None = None,
+    level_label: str = "threshold",
+    legend_size: int = 8,
+) -> None:
+    """The one panel every learning-curve figure draws: per label, moving return vs real
+    episodes, mean and 95% band over seeds (`curves[label] = (episodes [T], returns [S, T])`),
+    and a dashed line at `level` if given."""
+    for label, (episodes, returns) in curves.items():
+        mean, low, high = mean_band(returns)
+        (line,) = ax.plot(episodes, mean, label=f"{label} ({returns.shape[0]} seeds)")
+        ax.fill_between(episodes, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
+    if level is not None:
+        ax.axhline(level, color="grey", linestyle="--", linewidth=1, label=level_label)
+    if title is not None:
+        ax.set_title(title)
+    ax.set_xlabel("real episodes (summed over workers)")
+    ax.set_ylabel("moving return")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper left", fontsize=legend_size)
 
 
 def learning_curves(
@@ -21,22 +46,9 @@ def learning_curves(
     title: str,
     threshold: float | None = None,
 ) -> None:
-    """One line per label: moving return vs real episodes, mean and 95% band over seeds.
-
-    `curves[label] = (episodes [T], moving_return [S, T])`.
-    """
+    """One figure of one `band_panel`, written to `path`."""
     fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
-    for label, (episodes, returns) in curves.items():
-        mean, low, high = mean_band(returns)
-        (line,) = ax.plot(episodes, mean, label=f"{label} ({returns.shape[0]} seeds)")
-        ax.fill_between(episodes, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
-    if threshold is not None:
-        ax.axhline(threshold, color="grey", linestyle="--", linewidth=1, label="threshold")
-    ax.set_xlabel("real episodes (summed over workers)")
-    ax.set_ylabel("moving return")
-    ax.set_title(title)
-    ax.grid(alpha=0.3)
-    ax.legend(loc="upper left", fontsize=8)
+    band_panel(ax, curves, title, threshold)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
@@ -50,15 +62,19 @@ def run_curves(run_dir: Path, name: str) -> tuple[dict[str, tuple[np.ndarray, np
     """
     if not run_dir.is_dir():
         raise ValueError(f"no such run directory: {run_dir}")
+    run = RunDir(run_dir)
+    config = run.read_config()  # RunDirError (a ValueError) names what is wrong
     try:
-        config, points = _read_run(run_dir)
-    except FileNotFoundError as error:
-        raise ValueError(
-            f"{run_dir} is not a run directory: no {Path(error.filename).name}"
-        ) from None
-    except (OSError, ValueError, TypeError, KeyError) as error:
-        raise ValueError(f"{run_dir}: unreadable config.json or metrics.jsonl ({error})") from None
-    show_k = len(config.k) > 1 or ALGORITHMS.get(config.algo, ALGORITHMS["ldn"]).ld_stop
+        lines = run.read_metrics()
+    except FileNotFoundError:
+        raise ValueError(f"{run_dir} has no metrics yet (no metrics.jsonl)") from None
+    except (OSError, UnicodeDecodeError, KeyError, TypeError) as error:
+        raise ValueError(f"{run_dir}: unreadable metrics.jsonl ({error})") from None
+    points: dict[float, dict[int, dict[int, tuple]]] = {}
+    for line in lines:
+        logged = points.setdefault(line["k"], {}).setdefault(line["seed"], {})
+        logged[line["iteration"]] = (line["episodes"], line["moving_return"])
+    show_k = len(config.k) > 1 or config.uses_k
     curves = {}
     for k, by_seed in points.items():
         # Iterations every seed has logged: a run still training may be ahead in some seeds.
@@ -72,22 +88,6 @@ def run_curves(run_dir: Path, name: str) -> tuple[dict[str, tuple[np.ndarray, np
     if not curves:
         raise ValueError(f"{run_dir} has no metrics yet")
     return curves, config
-
-
-def _read_run(run_dir: Path) -> tuple[Config, dict[float, dict[int, dict[int, tuple]]]]:
-    """config.json, and metrics.jsonl as `{k: {seed: {iteration: (episodes, moving_return)}}}`.
-
-    An iteration logged twice (a resumed run) counts once, its last line winning.
-    """
-    config = Config.from_dict(json.loads((run_dir / "config.json").read_text()))
-    points: dict[float, dict[int, dict[int, tuple]]] = {}
-    with open(run_dir / "metrics.jsonl") as lines:
-        for text in lines:
-            if text.strip():
-                line = json.loads(text)
-                logged = points.setdefault(line["k"], {}).setdefault(line["seed"], {})
-                logged[line["iteration"]] = (line["episodes"], line["moving_return"])
-    return config, points
 
 
 def compare_runs(run_dirs: list[Path], path: Path) -> None:

@@ -16,7 +16,6 @@ Nothing here changes training: it reads a `TrainState` and returns arrays.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import jax
@@ -26,7 +25,6 @@ from flax import struct
 from scipy import stats
 
 from envs import cartpole
-from ldn_jax import checkpoint
 from ldn_jax.config import Config
 from ldn_jax.learning_degree import (
     deviation,
@@ -37,7 +35,7 @@ from ldn_jax.learning_degree import (
     stop_draw,
     stop_probability,
 )
-from ldn_jax.policy import FINAL_CHECKPOINT
+from ldn_jax.run_dir import RunDir
 from ldn_jax.train import Trainer, TrainState
 
 Array = jax.Array
@@ -195,11 +193,10 @@ def _check_single_model(trainer: Trainer) -> None:
 
 def load_run(run_dir: str | Path) -> tuple[Config, Trainer, TrainState]:
     """A finished run's config, trainer and batched final state `[K, S]` (as `load_policy`)."""
-    run_dir = Path(run_dir)
-    config = Config.from_dict(json.loads((run_dir / "config.json").read_text()))
+    run = RunDir(run_dir)
+    config = run.read_config()
     trainer = Trainer(config)
-    like = jax.eval_shape(trainer.init_batch)
-    states = checkpoint.restore(run_dir / "checkpoints" / FINAL_CHECKPOINT, like)
+    states = run.restore_final(jax.eval_shape(trainer.init_batch))
     return config, trainer, states
 
 

@@ -13,8 +13,10 @@ from dataclasses import dataclass, field
 
 import envs
 from envs.mujoco import BACKEND_CHOICES
+from ldn_jax import networks
 
-ACTIVATIONS = ("linear", "relu", "relu6", "tanh")
+ACTIVATIONS = tuple(networks.ACTIVATIONS)
+"""Hidden activations the networks know (`ldn_jax.networks` owns them)."""
 
 LD_ESTIMATORS = ("m0", "ensemble")
 """How the learning degree is estimated: M1 against its frozen initial copy M0 (eq. 3-6), or
@@ -138,12 +140,14 @@ class Config:
     """Algorithm: one of `ALGORITHMS`."""
     preset: str = "paper"
     """The preset these values started from (recorded for provenance)."""
-    seeds: int = 3
+    seeds: int = 5
     """Number of seeds, vmapped; seed i uses PRNG key i."""
-    k: tuple[float, ...] = (1.0,)
-    """Learning-degree gains K (eq. 6), vmapped; K=1 is eq. 4."""
+    k: tuple[float, ...] = (0.5, 1.0, 2.0)
+    """Learning-degree gains K (eq. 6), vmapped; K=1 is eq. 4. An algorithm that does not
+    stop by the learning degree keeps only the first (`from_preset`): K does nothing there."""
     episodes: int = 1600
-    """Real episodes per seed and K, summed over workers."""
+    """Real episodes per seed and K, summed over workers (`from_preset`: `DEFAULT_EPISODES`
+    where an env has its own)."""
     workers: int = 8
     """Synchronous workers (vmapped); one real and one imagined episode each per iteration."""
     backend: str = "auto"
@@ -157,9 +161,44 @@ class Config:
     eval_episodes: int = 10
     """Episodes of the deterministic policy evaluated at the end of training."""
     chunk_iterations: int = 5
-    """Iterations per compiled chunk: the host logs and checkpoints between chunks."""
+    """Iterations per compiled chunk: the host logs and checkpoints between chunks
+    (`from_preset`: `DEFAULT_CHUNK` where an env has its own)."""
     agent: AgentConfig = field(default_factory=AgentConfig)
     model: ModelConfig = field(default_factory=ModelConfig)
+
+    @classmethod
+    def from_preset(cls, name: str, **overrides) -> Config:
+        """Build a config from a preset plus top-level overrides (agent/model as dicts).
+
+        What is not given takes its default, the env's own where it has one (`DEFAULT_EPISODES`,
+        `DEFAULT_CHUNK`, `CONTINUOUS_DEFAULTS`); an algorithm that does not use K keeps the first
+        of the K values."""
+        if name not in PRESETS:
+            raise ValueError(f"unknown preset {name!r}; valid presets: {', '.join(PRESETS)}")
+        preset = PRESETS[name]
+        algo = overrides.get("algo", Config.algo)
+        env = overrides.get("env", Config.env)
+        overrides.setdefault("episodes", DEFAULT_EPISODES.get(env, Config.episodes))
+        overrides.setdefault("chunk_iterations", DEFAULT_CHUNK.get(env, Config.chunk_iterations))
+        gains = tuple(overrides.get("k", Config.k))
+        overrides["k"] = gains if ALGORITHMS.get(algo, ALGORITHMS["ldn"]).ld_stop else gains[:1]
+        learner = ALGORITHMS[algo].learner if algo in ALGORITHMS else "a2c"
+        agent, model = dict(LEARNER_DEFAULTS[learner]), {}
+        if _continuous(env):
+            agent.update(CONTINUOUS_DEFAULTS[learner]["agent"])
+            model.update(CONTINUOUS_MODEL)
+        agent.update({**preset.get("agent", {}), **overrides.pop("agent", {})})
+        model.update({**preset.get("model", {}), **overrides.pop("model", {})})
+        top = {key: v for key, v in preset.items() if key not in ("agent", "model")}
+        return cls(
+            preset=name, **top, **overrides, agent=AgentConfig(**agent), model=ModelConfig(**model)
+        )
+
+    @property
+    def uses_k(self) -> bool:
+        """Whether K means anything to this run's algorithm (it stops by the learning degree);
+        only then do K values appear in what the run prints."""
+        return self.algo in ALGORITHMS and ALGORITHMS[self.algo].ld_stop
 
     @property
     def algorithm(self) -> Algorithm:
@@ -217,9 +256,6 @@ linear nets need for 11- to 27-dimensional observations (our reading; the paper 
 
 CONTINUOUS_MODEL = {"normalize": True, "predict_delta": True, "env_reward": True}
 
-BACKENDS = BACKEND_CHOICES
-"""Values `Config.backend` takes (`envs.mujoco` owns the list)."""
-
 DEFAULT_EPISODES = {"inverted_pendulum": 800}
 """Budgets a CPU finishes in minutes, for envs whose paper-scale budget takes hours on CPU
 (1,000-step episodes of MJX physics): the `episodes` default where it is not `Config`'s."""
@@ -239,23 +275,8 @@ PRESETS: dict[str, dict] = {
 }
 
 
-def from_preset(name: str, **overrides) -> Config:
-    """Build a config from a preset plus top-level overrides (agent/model as dicts)."""
-    if name not in PRESETS:
-        raise ValueError(f"unknown preset {name!r}; valid presets: {', '.join(PRESETS)}")
-    preset = PRESETS[name]
-    algo = overrides.get("algo", Config.algo)
-    learner = ALGORITHMS[algo].learner if algo in ALGORITHMS else "a2c"
-    agent, model = dict(LEARNER_DEFAULTS[learner]), {}
-    if _continuous(overrides.get("env", Config.env)):
-        agent.update(CONTINUOUS_DEFAULTS[learner]["agent"])
-        model.update(CONTINUOUS_MODEL)
-    agent.update({**preset.get("agent", {}), **overrides.pop("agent", {})})
-    model.update({**preset.get("model", {}), **overrides.pop("model", {})})
-    top = {k: v for k, v in preset.items() if k not in ("agent", "model")}
-    return Config(
-        preset=name, **top, **overrides, agent=AgentConfig(**agent), model=ModelConfig(**model)
-    )
+from_preset = Config.from_preset
+"""`Config.from_preset`, the name callers import."""
 
 
 def _continuous(env: str) -> bool:
@@ -285,7 +306,10 @@ def validate(config: Config) -> Config:
         (len(set(config.k)) == len(config.k), f"K values must be distinct: {config.k}"),
         (config.episodes >= 1, f"episodes must be >= 1, got {config.episodes}"),
         (config.workers >= 1, f"workers must be >= 1, got {config.workers}"),
-        (config.backend in BACKENDS, f"backend must be one of {', '.join(BACKENDS)}"),
+        (
+            config.backend in BACKEND_CHOICES,
+            f"backend must be one of {', '.join(BACKEND_CHOICES)}",
+        ),
         (0 < config.moving_decay < 1, "moving_decay must be in (0, 1)"),
         (config.eval_episodes >= 1, "eval_episodes must be >= 1"),
         (config.chunk_iterations >= 1, "chunk_iterations must be >= 1"),

@@ -15,6 +15,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
+from ldn_jax.config import LD_ESTIMATORS
 from ldn_jax.dynamics import Dynamics, ModelState
 from ldn_jax.learning_degree import (
     deviation,
@@ -38,7 +39,7 @@ def model_world(
     is_terminal: Any,
     model_action: Any,
     env_reward: Any,
-    k: Array,
+    gain: Array,
     ld_stop: bool,
 ) -> WorldStep:
     """A world that steps M1 (an ensemble: its members' mean prediction). Its extras carry
@@ -50,11 +51,11 @@ def model_world(
     model's normalised output space (the raw one when normalisation is off), so no
     observation dimension dominates it by its units; so is an ensemble's disagreement.
     """
-    estimate = _ensemble_estimate if dynamics.ensemble else _m0_estimate
+    estimate = LD_ESTIMATES[dynamics.config.ld]
 
     def step(key: Array, world: None, obs: Array, action: Array):
         encoded = model_action(action)
-        predicted, ld, p_stop = estimate(dynamics, model, obs, encoded, k)
+        predicted, ld, p_stop = estimate(dynamics, model, obs, encoded, gain)
         next_obs, reward = dynamics.denormalize(model.stats, *predicted)
         if env_reward is not None:
             reward = env_reward(obs, action, next_obs)
@@ -65,22 +66,31 @@ def model_world(
     return step
 
 
-def _m0_estimate(dynamics: Dynamics, model: ModelState, obs: Array, action: Array, k: Array):
+def _m0_estimate(dynamics: Dynamics, model: ModelState, obs: Array, action: Array, gain: Array):
     """M1's normalised prediction, and LD and P(stop) of M1 vs M0 (eq. 3-6)."""
     m1 = dynamics.predict_normalized(model.params, model.stats, obs, action)
     m0 = dynamics.predict_normalized(model.frozen, model.stats, obs, action)
     sigma2 = deviation(_joined(*m1), _joined(*m0))
-    return m1, learning_degree(sigma2, k), stop_probability(sigma2, k)
+    return m1, learning_degree(sigma2, gain), stop_probability(sigma2, gain)
 
 
-def _ensemble_estimate(dynamics: Dynamics, model: ModelState, obs: Array, action: Array, k: Array):
+def _ensemble_estimate(
+    dynamics: Dynamics, model: ModelState, obs: Array, action: Array, gain: Array
+):
     """The members' mean normalised prediction, and LD and P(stop) of their disagreement
     relative to their fit error."""
     members = _joined(*dynamics.predict_members(model.params, model.stats, obs, action))
     mean = ensemble_mean(members)
     d_rel = relative_disagreement(disagreement(members), model.error_scale)
     predicted = (mean[..., :-1], mean[..., -1])
-    return predicted, ensemble_learning_degree(d_rel, k), ensemble_stop_probability(d_rel, k)
+    return predicted, ensemble_learning_degree(d_rel, gain), ensemble_stop_probability(d_rel, gain)
+
+
+LD_ESTIMATES = {"m0": _m0_estimate, "ensemble": _ensemble_estimate}
+"""`ModelConfig.ld` -> `(dynamics, model, obs, action, gain) -> (prediction, LD, P(stop))`:
+the learning-degree estimators, as `LEARNERS` holds the learners. A new estimator is a
+function here and its name in `ldn_jax.config.LD_ESTIMATORS`."""
+assert tuple(LD_ESTIMATES) == LD_ESTIMATORS, "estimators and their config names disagree"
 
 
 def _joined(next_obs: Array, reward: Array) -> Array:

@@ -25,19 +25,19 @@ def deviation(pred_m1: Array, pred_m0: Array) -> Array:
     return 0.5 * jnp.mean(jnp.square(pred_m1 - pred_m0), axis=-1)
 
 
-def learning_degree(sigma2: Array, k: Array | float = 1.0) -> Array:
+def learning_degree(sigma2: Array, gain: Array | float = 1.0) -> Array:
     """Eq. 4 and 6: LD = 2 sigmoid(K sigma2) - 1, in [0, 1) for sigma2 >= 0.
 
     Computed as the identical tanh(K sigma2 / 2), which keeps its precision near 0 where
     2 sigmoid(x) - 1 cancels. In float32 LD rounds to 1 above K sigma2 ~ 17; draws use
     `stop_probability`, which stays exact there.
     """
-    return jnp.tanh(0.5 * k * sigma2)
+    return jnp.tanh(0.5 * gain * sigma2)
 
 
-def stop_probability(sigma2: Array, k: Array | float = 1.0) -> Array:
+def stop_probability(sigma2: Array, gain: Array | float = 1.0) -> Array:
     """Eq. 5: P(stop) = 1 - LD = 2 sigmoid(-K sigma2), computed without cancellation."""
-    return 2.0 * jax.nn.sigmoid(-k * sigma2)
+    return 2.0 * jax.nn.sigmoid(-gain * sigma2)
 
 
 def stop_draw(key: Array, p_stop: Array) -> Array:
@@ -80,20 +80,20 @@ def relative_disagreement(d: Array, error_scale: Array | float) -> Array:
     return d / jnp.maximum(error_scale, ERROR_FLOOR)
 
 
-def ensemble_learning_degree(d: Array, k: Array | float = 1.0) -> Array:
+def ensemble_learning_degree(d: Array, gain: Array | float = 1.0) -> Array:
     """Eq. 4/6's mapping applied to ensemble disagreement, flipped: 2 sigmoid(-K d), in (0, 1].
 
     M1's deviation from M0 grows with what it has learned; disagreement grows with what the
     models do not know. So LD is 1 where the members agree and falls as they disagree, and the
     stop probability 1 - LD = 2 sigmoid(K d) - 1 is eq. 4 on the disagreement. `[...] -> [...]`.
     """
-    return 2.0 * jax.nn.sigmoid(-k * d)
+    return 2.0 * jax.nn.sigmoid(-gain * d)
 
 
-def ensemble_stop_probability(d: Array, k: Array | float = 1.0) -> Array:
+def ensemble_stop_probability(d: Array, gain: Array | float = 1.0) -> Array:
     """1 - `ensemble_learning_degree` = tanh(K d / 2), exact near d = 0 where 1 - 2 sigmoid(-K d)
     cancels. `[...] -> [...]`; exactly 0 at d = 0, so members that agree never stop."""
-    return jnp.tanh(0.5 * k * d)
+    return jnp.tanh(0.5 * gain * d)
 
 
 LD_BINS = 10

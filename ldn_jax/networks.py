@@ -10,7 +10,7 @@ import jax.numpy as jnp
 
 Array = jax.Array
 
-_ACTIVATIONS: dict[str, Callable[[Array], Array]] = {
+ACTIVATIONS: dict[str, Callable[[Array], Array]] = {
     "linear": lambda x: x,
     "relu": nn.relu,
     "relu6": nn.relu6,
@@ -30,7 +30,7 @@ class MLP(nn.Module):
     def __call__(self, x: Array) -> Array:
         init = nn.initializers.normal(self.init_std)
         x = nn.Dense(self.hidden, kernel_init=init)(x)
-        x = _ACTIVATIONS[self.activation](x)
+        x = ACTIVATIONS[self.activation](x)
         return nn.Dense(self.out, kernel_init=init)(x)
 
 

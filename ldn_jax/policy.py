@@ -2,18 +2,14 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from pathlib import Path
 
 import jax
 import numpy as np
 
-from ldn_jax import checkpoint
-from ldn_jax.config import Config
+from ldn_jax.run_dir import RunDir
 from ldn_jax.train import Trainer
-
-FINAL_CHECKPOINT = "final"
 
 
 def load_policy(
@@ -25,14 +21,14 @@ def load_policy(
     float32 numpy array within the action bounds (continuous: the Gaussian's mean).
     `k=None` picks the run's only K, or its first one.
     """
-    run_dir = Path(run_dir)
-    config = Config.from_dict(json.loads((run_dir / "config.json").read_text()))
+    run = RunDir(run_dir)
+    config = run.read_config()
     if not 0 <= seed < config.seeds:
         raise ValueError(f"seed {seed} not in this run (it has seeds 0..{config.seeds - 1})")
     k_index = 0 if k is None else _index_of(config.k, k)
     trainer = Trainer(config)
     like = jax.eval_shape(trainer.init_batch)
-    state = checkpoint.restore(run_dir / "checkpoints" / FINAL_CHECKPOINT, like)
+    state = run.restore_final(like)
     params = jax.tree.map(lambda x: x[k_index, seed], state.learner.params)
     greedy = jax.jit(trainer.learner.greedy)
 

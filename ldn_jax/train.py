@@ -79,10 +79,8 @@ class Trainer:
 
     def __init__(self, config: Config):
         self.config = config
-        self.env, self.env_params = envs.make(config.env)
-        if hasattr(self.env_params, "backend"):
-            backend = envs.mujoco.resolve_backend(config.backend)
-            self.env_params = self.env_params.replace(backend=backend)
+        self.env, params = envs.make(config.env)
+        self.env_params = self.env.with_backend(params, config.backend)
         self.obs_size = self.env.observation_size(self.env_params)
         self.action_spec = self.env.action_spec(self.env_params)
         self.max_steps = self.env_params.max_steps
@@ -157,7 +155,9 @@ class Trainer:
         model, loss = self.dynamics.fit(state.model, buffer, key)
         return state.replace(model=model, buffer=buffer), loss
 
-    def imagine_stage(self, state: TrainState, key: Array, k: Array) -> tuple[TrainState, Episodes]:
+    def imagine_stage(
+        self, state: TrainState, key: Array, gain: Array
+    ) -> tuple[TrainState, Episodes]:
         k_reset, k_play = jax.random.split(key)
         obs, _ = self._reset(k_reset)
         world = model_world(
@@ -166,7 +166,7 @@ class Trainer:
             lambda o: self.env.is_terminal(o, self.env_params),
             self.learner.policy.model_action,
             self._env_reward(),
-            k,
+            gain,
             self.config.algorithm.ld_stop,
         )
         learner, episodes = play_episodes(
@@ -176,25 +176,19 @@ class Trainer:
 
     def _env_reward(self):
         """The env's exact reward `(obs, action, next_obs) -> [...]`, if used and known."""
-        reward = getattr(self.env, "reward", None)
-        if not self.config.model.env_reward or reward is None:
+        if not (self.config.model.env_reward and self.env.exact_reward(self.env_params)):
             return None
-        obs = jax.ShapeDtypeStruct((1, self.obs_size), jnp.float32)
-        action = jax.ShapeDtypeStruct((1, self.model_action_size), jnp.float32)
-        known = lambda o, a: reward(o, a, o, self.env_params)
-        if jax.eval_shape(known, obs, action) is None:  # this task's reward is not exact
-            return None
-        return lambda obs, action, next_obs: reward(obs, action, next_obs, self.env_params)
+        return lambda obs, action, next_obs: self.env.reward(obs, action, next_obs, self.env_params)
 
     # -- one iteration and a chunk of them -------------------------------------------------
 
-    def iteration(self, state: TrainState, k: Array) -> tuple[TrainState, dict]:
+    def iteration(self, state: TrainState, gain: Array) -> tuple[TrainState, dict]:
         """One iteration of Algorithm 1 for every worker; returns per-iteration metrics.
 
         If the iteration makes any checked quantity non-finite, the run keeps its previous
         state from then on (frozen) and `failure` says what diverged; other vmapped runs go on.
         """
-        new, metrics = self._iteration(state, k)
+        new, metrics = self._iteration(state, gain)
         failure = self._failure(new, metrics)
         first = (state.failure == 0) & (failure != 0)
         frozen = (state.failure != 0) | first
@@ -228,7 +222,7 @@ class Trainer:
         bad = jnp.stack([~_all_finite(tree) for tree in checks])
         return (bad.astype(jnp.int32) << jnp.arange(len(checks))).sum()
 
-    def _iteration(self, state: TrainState, k: Array) -> tuple[TrainState, dict]:
+    def _iteration(self, state: TrainState, gain: Array) -> tuple[TrainState, dict]:
         key, k_real, k_model, k_imagine = jax.random.split(state.key, 4)
         state, real = self.real_stage(state, k_real)
 
@@ -253,7 +247,7 @@ class Trainer:
         imagined_steps = jnp.zeros((), jnp.int32)
         if self.dynamics is not None:
             state, metrics["model_loss"] = self.model_stage(state, real, k_model)
-            state, imagined = self.imagine_stage(state, k_imagine, k)
+            state, imagined = self.imagine_stage(state, k_imagine, gain)
             weight = imagined.steps.weight
             imagined_steps = weight.sum().astype(jnp.int32)
             ld = imagined.extras["ld"]
@@ -273,10 +267,11 @@ class Trainer:
         )
         return state, metrics
 
-    def train_chunk(self, state: TrainState, k: Array) -> tuple[TrainState, dict]:
-        """`config.chunk_iterations` iterations; metrics stacked `[N, ...]`."""
+    def train_chunk(self, state: TrainState, gain: Array) -> tuple[TrainState, dict]:
+        """`config.chunk_iterations` iterations; metrics stacked `[N, ...]`. `gain` is this
+        run's learning-degree gain K (eq. 6)."""
         return jax.lax.scan(
-            lambda s, _: self.iteration(s, k), state, length=self.config.chunk_iterations
+            lambda s, _: self.iteration(s, gain), state, length=self.config.chunk_iterations
         )
 
     def evaluate(self, state: TrainState, key: Array) -> Array:
@@ -285,20 +280,22 @@ class Trainer:
         obs, env_state = jax.vmap(self.env.reset, (0, None))(
             jax.random.split(key, n), self.env_params
         )
-        step = jax.vmap(self.env.step, (None, 0, 0, None))
+        step = jax.vmap(self.env.step, (0, 0, 0, None))
 
-        def body(carry, _):
+        def body(carry, key):
             obs, env_state, alive, total = carry
             action = self.learner.greedy(state.learner.params, obs)
             obs, env_state, reward, terminated, truncated, _ = step(
-                key, env_state, action, self.env_params
+                jax.random.split(key, n), env_state, action, self.env_params
             )
             total = total + reward * alive
             alive = alive & ~(terminated | truncated)
             return (obs, env_state, alive, total), None
 
         init = (obs, env_state, jnp.ones((n,), bool), jnp.zeros((n,)))
-        (_, _, _, total), _ = jax.lax.scan(body, init, length=self.max_steps)
+        # A fresh key per env step (the resets keep `key`'s split, as before).
+        step_keys = jax.random.split(jax.random.fold_in(key, 1), self.max_steps)
+        (_, _, _, total), _ = jax.lax.scan(body, init, step_keys)
         return total.mean()
 
     # -- seeds x K -------------------------------------------------------------------------
@@ -311,6 +308,7 @@ class Trainer:
         return jax.tree.map(lambda x: jnp.broadcast_to(x, (n_k, *x.shape)), states)
 
     def k_values(self) -> Array:
+        """The gains K of `config.k`, `[K]`: the second argument of `batched_chunk`."""
         return jnp.asarray(self.config.k, jnp.float32)
 
     def batched_chunk(self, mesh: Mesh | None = None, bitwise: bool = False):

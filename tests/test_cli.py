@@ -108,7 +108,7 @@ def test_ppo_ldn_run_logs_ppo_losses(tmp_path):
 
 
 def test_auto_backend_is_recorded_as_what_it_resolved_to():
-    from experiments import run
+    from experiments import flags as run
 
     config = run.build_config(run.parse_args(["--env", "hopper"]))
     assert config.backend == "native"  # a CPU machine

@@ -103,13 +103,13 @@ def test_continuous_defaults_normalise_the_model():
 
 @pytest.mark.mujoco
 def test_ldn_trains_on_inverted_pendulum_end_to_end(tmp_path):
-    from experiments.run import train
+    from experiments.training import train
     from ldn_jax import load_policy
 
     config = from_preset(
         "paper", env="inverted_pendulum", algo="ldn", seeds=1, episodes=4, workers=2
     )
-    summary = train(config, tmp_path, 0, quiet=True)
+    summary = train(config, tmp_path, checkpoint_every=0, quiet=True)
     run = summary["runs"][0]
     assert run["diverged"] is None and np.isfinite(run["final_moving_return"])
     assert summary["imagined_steps"] > 0

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from experiments.run import read_run_config, train
+from experiments.training import train
 from ldn_jax import checkpoint, load_policy
 from ldn_jax.buffer import buffer_add, buffer_init
 from ldn_jax.config import AgentConfig, Config, ModelConfig, from_preset, validate
@@ -26,8 +26,9 @@ from ldn_jax.learning_degree import (
     ensemble_stop_probability,
     relative_disagreement,
 )
-from ldn_jax.policy import FINAL_CHECKPOINT
 from ldn_jax.rollout import play_episodes
+from ldn_jax.run_dir import FINAL as FINAL_CHECKPOINT
+from ldn_jax.run_dir import read_config as read_run_config
 from ldn_jax.train import Trainer
 from tests.test_core import _cartpole_transitions
 
@@ -247,7 +248,7 @@ def test_ensemble_run_is_finite_deterministic_and_loads(ensemble_run, tmp_path):
         assert all(v is not None and np.isfinite(v) for v in line["losses"].values()), line
     assert json.loads((ensemble_run / "summary.json").read_text())["runs"][0]["diverged"] is None
     # The same config again, in this process: the same bits.
-    train(config, tmp_path, 0, quiet=True)
+    train(config, tmp_path, checkpoint_every=0, quiet=True)
     assert _metric_lines(tmp_path) == first
     # The checkpoint holds the members stacked [K, S, E, ...], M0 copies untouched.
     trainer = Trainer(config)

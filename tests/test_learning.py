@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from experiments.run import train
+from experiments.training import train
 from ldn_jax.config import from_preset
 
 # Measured on 2 CPU cores (2026-11-22), seeds 0-3, paper preset: a2c reached 150 in
@@ -17,7 +17,9 @@ BUDGET = {"a2c": 1600, "ldn": 1600, "ppo": 800, "ppo-ldn": 1000}
 @pytest.mark.slow
 @pytest.mark.parametrize("algo", list(BUDGET))
 def test_reaches_150_on_cartpole_v1(algo, tmp_path):
-    config = from_preset("paper", env="cartpole-v1", algo=algo, seeds=4, episodes=BUDGET[algo])
+    config = from_preset(
+        "paper", env="cartpole-v1", algo=algo, seeds=4, k=(1.0,), episodes=BUDGET[algo]
+    )
     summary = train(config, tmp_path, checkpoint_every=0, quiet=True)
     reached = [r for r in summary["runs"] if r["episodes_to_threshold"] is not None]
     assert len(reached) >= 3, summary["runs"]
@@ -29,7 +31,9 @@ def test_reaches_150_on_cartpole_v1(algo, tmp_path):
 @pytest.mark.slow
 @pytest.mark.mujoco
 def test_ldn_improves_on_inverted_pendulum(tmp_path):
-    config = from_preset("paper", env="inverted_pendulum", algo="ldn", seeds=4, episodes=800)
+    config = from_preset(
+        "paper", env="inverted_pendulum", algo="ldn", seeds=4, k=(1.0,), episodes=800
+    )
     summary = train(config, tmp_path, checkpoint_every=0, quiet=True)
     lines = [json.loads(line) for line in (tmp_path / "metrics.jsonl").read_text().splitlines()]
     gains = []

@@ -324,23 +324,24 @@ def test_a_mujoco_run_prints_no_library_noise():
 def test_native_run_resumes_to_the_bit(tmp_path):
     """ldn on inverted_pendulum through the native engine, interrupted after 2 of 4 chunks and
     resumed: every metrics line and the final history equal the uninterrupted run's."""
-    from experiments.run import Interrupted, read_run_config, train
+    from experiments.training import Interrupted, train
     from ldn_jax.config import from_preset
+    from ldn_jax.run_dir import read_config as read_run_config
     from tests.test_resume import StopAfter, _lines
 
     config = from_preset(
-        "paper", env="inverted_pendulum", algo="ldn", seeds=2, episodes=8, workers=2
+        "paper", env="inverted_pendulum", algo="ldn", seeds=2, k=(1.0,), episodes=8, workers=2
     )
     config = dataclasses.replace(config, chunk_iterations=1, backend="native")
     reference, resumed = tmp_path / "reference", tmp_path / "resumed"
     reference.mkdir(), resumed.mkdir()
-    summary = train(config, reference, 1, quiet=True)
+    summary = train(config, reference, checkpoint_every=1, quiet=True)
     assert summary["backend"] == "native" and summary["imagined_steps"] > 0
     with pytest.raises(Interrupted):
-        train(config, resumed, 1, quiet=True, stop=StopAfter(2))
+        train(config, resumed, checkpoint_every=1, quiet=True, stop=StopAfter(2))
     assert len(_lines(resumed)) == 2 * 2
     assert read_run_config(resumed).backend == "native"
-    train(read_run_config(resumed), resumed, 1, quiet=True, resume=True)
+    train(read_run_config(resumed), resumed, checkpoint_every=1, quiet=True, resume=True)
     assert _lines(resumed) == _lines(reference)
     final = lambda run: np.load(run / "checkpoints" / "final.host.npz")["history/moving_after"]
     np.testing.assert_array_equal(final(resumed), final(reference))

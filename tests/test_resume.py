@@ -12,8 +12,9 @@ import jax
 import numpy as np
 import pytest
 
-from experiments.run import Interrupted, Stop, read_run_config, train
+from experiments.training import Interrupted, Stop, train
 from ldn_jax.config import from_preset
+from ldn_jax.run_dir import read_config as read_run_config
 from ldn_jax.train import Trainer
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -47,7 +48,7 @@ def _timeless(summary: dict) -> list[dict]:
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory):
     out = tmp_path_factory.mktemp("reference")
-    summary = train(from_preset("paper", **CONFIG), out, 2, quiet=True)
+    summary = train(from_preset("paper", **CONFIG), out, checkpoint_every=2, quiet=True)
     return out, summary
 
 
@@ -56,10 +57,12 @@ def test_resume_after_interrupt_equals_uninterrupted_run_bitwise(reference, tmp_
     ref_dir, ref_summary = reference
     config = from_preset("paper", **CONFIG)
     with pytest.raises(Interrupted):
-        train(config, tmp_path, 2, quiet=True, stop=StopAfter(stop_after))
+        train(config, tmp_path, checkpoint_every=2, quiet=True, stop=StopAfter(stop_after))
     assert not (tmp_path / "summary.json").exists()
     assert len(_lines(tmp_path)) == 2 * 2 * 2 * stop_after  # K x seeds x iterations per chunk
-    summary = train(read_run_config(tmp_path), tmp_path, 2, quiet=True, resume=True)
+    summary = train(
+        read_run_config(tmp_path), tmp_path, checkpoint_every=2, quiet=True, resume=True
+    )
     assert _lines(tmp_path) == _lines(ref_dir)
     assert _timeless(summary) == _timeless(ref_summary) and summary["resumes"] == 1
     final = lambda run: np.load(run / "checkpoints" / "final.host.npz")["history/moving_after"]
@@ -154,9 +157,11 @@ def test_truncated_checkpoint_gives_a_one_line_error(reference, tmp_path):
     ref_dir, _ = reference
     copy = tmp_path / "copy"
     subprocess.run(["cp", "-r", str(ref_dir), str(copy)], check=True)
-    files = [p for p in (copy / "checkpoints" / "final").rglob("*") if p.is_file()]
-    largest = max(files, key=lambda p: p.stat().st_size)
-    largest.write_bytes(largest.read_bytes()[: largest.stat().st_size // 2])
+    # Every checkpoint damaged (one damaged copy is survived: tests/test_faults.py).
+    for state_dir in (p for p in (copy / "checkpoints").iterdir() if p.is_dir()):
+        files = [p for p in state_dir.rglob("*") if p.is_file()]
+        largest = max(files, key=lambda p: p.stat().st_size)
+        largest.write_bytes(largest.read_bytes()[: largest.stat().st_size // 2])
     _assert_one_line_error(_cli("--resume", str(copy)), "unreadable")
 
 
@@ -177,7 +182,7 @@ def test_diverging_seed_is_frozen_and_flagged_while_others_finish(tmp_path, monk
 
     monkeypatch.setattr(Trainer, "init_batch", with_absurd_lr)
     config = from_preset("paper", **{**CONFIG, "seeds": 3, "k": (1.0,), "episodes": 32})
-    summary = train(config, tmp_path, 0, quiet=True)
+    summary = train(config, tmp_path, checkpoint_every=0, quiet=True)
     runs = {run["seed"]: run for run in summary["runs"]}
     assert runs[1]["diverged"]["iteration"] == 1
     assert "real-stage losses" in runs[1]["diverged"]["quantities"]

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from experiments.run import train
+from experiments.training import train
 from ldn_jax.config import from_preset
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -87,14 +87,14 @@ def _assert_same_run(run_dir: Path, reference: Path) -> None:
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory):
     out = tmp_path_factory.mktemp("one-device")
-    train(from_preset("paper", **CONFIG), out, 0, quiet=True)
+    train(from_preset("paper", **CONFIG), out, checkpoint_every=0, quiet=True)
     return out
 
 
 @pytest.fixture(scope="module")
 def bitwise_reference(tmp_path_factory):
     out = tmp_path_factory.mktemp("one-device-bitwise")
-    train(from_preset("paper", **CONFIG), out, 0, quiet=True, bitwise=True)
+    train(from_preset("paper", **CONFIG), out, checkpoint_every=0, quiet=True, bitwise=True)
     return out
 
 

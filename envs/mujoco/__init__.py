@@ -148,6 +148,12 @@ class MujocoEnv:
             return None
         return task.reward_from_obs(obs, control(task, action), next_obs)
 
+    def exact_reward(self, params: EnvParams) -> bool:
+        return TASKS[params.task].reward_from_obs is not None
+
+    def with_backend(self, params: EnvParams, backend: str) -> EnvParams:
+        return params.replace(backend=resolve_backend(backend))
+
     def observation_size(self, params: EnvParams) -> int:
         return TASKS[params.task].obs_size
 

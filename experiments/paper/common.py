@@ -27,8 +27,9 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:  # run as `python experiments/paper/NAME.py`
     sys.path.insert(0, str(ROOT))
 
-from experiments.run import RUN_FORMAT, train  # noqa: E402
-from ldn_jax.config import DEFAULT_CHUNK, Config, from_preset, validate  # noqa: E402
+from experiments.training import train  # noqa: E402
+from ldn_jax.config import Config, from_preset, validate  # noqa: E402
+from ldn_jax.run_dir import RunDir  # noqa: E402
 
 RESULTS = ROOT / "experiments" / "results"
 
@@ -217,19 +218,15 @@ PAPER_TABLE5 = {
 
 def run_config(scale: Scale, env: str, algo: str, k: tuple[float, ...] = (1.0,), **model) -> Config:
     """The paper preset at this scale. Raises ValueError for a run this scale does not do:
-    the scripts report such rows as pending (MuJoCo tasks outside `scale.mujoco_episodes`:
-    1,000-step MJX episodes take hours on CPU at the budgets the tables need).
+    the scripts report such rows as pending (MuJoCo tasks outside `scale.mujoco_episodes`,
+    which this scale does not budget).
 
-    MuJoCo runs take `scale.mujoco_seeds` and one iteration per chunk (an iteration plays up
-    to 8,000 physics steps per seed). `model` overrides `ModelConfig` fields (e.g. ld)."""
+    MuJoCo runs take `scale.mujoco_seeds` and the env's own chunk (`DEFAULT_CHUNK`: one
+    iteration, up to 8,000 env steps per seed). `model` overrides `ModelConfig` fields."""
     if env in MUJOCO:
         if env not in scale.mujoco_episodes:
-            raise ValueError(f"{env} runs at --scale paper only (MJX on CPU is too slow here)")
-        size = {
-            "seeds": scale.mujoco_seeds,
-            "episodes": scale.mujoco_episodes[env],
-            "chunk_iterations": DEFAULT_CHUNK[env],
-        }
+            raise ValueError(f"{env} runs at --scale paper only (no budget at this scale)")
+        size = {"seeds": scale.mujoco_seeds, "episodes": scale.mujoco_episodes[env]}
     else:
         size = {
             "seeds": scale.seeds,
@@ -254,11 +251,11 @@ def run_dir(results: Path, scale: Scale, config: Config) -> Path:
 def ensure_run(config: Config, out: Path) -> dict:
     """The summary of the run of `config` in `out`: reused if finished, resumed if it was
     interrupted, trained from scratch otherwise (a run of another config there is replaced)."""
-    stored = out / "config.json"
-    if stored.exists():
-        if _same_config(json.loads(stored.read_text()), config):
-            if (out / "summary.json").exists() and (out / "checkpoints" / "final").is_dir():
-                return json.loads((out / "summary.json").read_text())
+    run = RunDir(out)
+    if run.holds_run():
+        if _same_config(json.loads(run.config_file.read_text()), config):
+            if run.is_finished():
+                return run.read_summary()
             print(f"resuming {out}", flush=True)
             return train(config, out, checkpoint_every=10, quiet=True, resume=True)
         shutil.rmtree(out)
@@ -275,7 +272,7 @@ def ensure_run(config: Config, out: Path) -> dict:
 def _same_config(stored: dict, config: Config) -> bool:
     """Whether a run directory's config.json is `config`: the same run format and the same
     settings once read back, so that a setting added later with its default still matches."""
-    if stored.get("run_format") != RUN_FORMAT:
+    if not RunDir.same_format(stored):
         return False
     try:
         plain = lambda c: json.loads(json.dumps(c.to_dict()))
@@ -288,8 +285,8 @@ def collect_runs(
     envs: tuple[str, ...], algos: tuple[str, ...], scale: Scale, results: Path, k=(1.0,)
 ) -> list[dict]:
     """Ensure the run of every env x algo; one entry each, in order: `{env, algo, status:
-    "done", dir, config, summary}`, or `{env, algo, status: "pending", reason}` for a run the
-    trainer cannot do yet (the MuJoCo rows until continuous actions land)."""
+    "done", dir, config, summary}`, or `{env, algo, status: "pending", reason}` for a run this
+    scale does not do (`run_config`)."""
     entries = []
     for env in envs:
         for algo in algos:
@@ -316,9 +313,8 @@ def collect_runs(
 
 
 def load_history(out: Path) -> dict[str, np.ndarray]:
-    """The run's per-iteration metrics `{name: [K, S, N, ...]}` (checkpoints/final.host.npz)."""
-    with np.load(out / "checkpoints" / "final.host.npz") as host:
-        return {n.split("/", 1)[1]: host[n] for n in host.files if n.startswith("history/")}
+    """The run's per-iteration metrics `{name: [K, S, N, ...]}`."""
+    return RunDir(out).history()
 
 
 def env_steps_per_seed(out: Path) -> float:
@@ -334,7 +330,7 @@ def mujoco_curves(
     run finished."""
     import matplotlib.pyplot as plt
 
-    from ldn_jax.metrics import mean_band
+    from experiments.plots import band_panel
 
     done: dict[str, list[dict]] = {}
     for entry in entries:
@@ -344,23 +340,13 @@ def mujoco_curves(
         return
     fig, axes = plt.subplots(1, len(done), figsize=(5 * len(done), 3.8), dpi=120, squeeze=False)
     for ax, (env, runs) in zip(axes[0], done.items(), strict=True):
+        curves = {}
         for entry in runs:
             history = load_history(entry["dir"])
-            mean, low, high = mean_band(history["moving_return"][0])
-            label = (
-                f"{PAPER_ALGOS.get(entry['algo'], entry['algo'])} ({entry['config'].seeds} seeds)"
-            )
-            (line,) = ax.plot(history["episodes"][0, 0], mean, label=label)
-            ax.fill_between(
-                history["episodes"][0, 0], low, high, color=line.get_color(), alpha=0.2, lw=0
-            )
-        if levels and env in levels:
-            ax.axhline(levels[env], color="grey", linestyle="--", linewidth=1, label="the top")
-        ax.set_title(env)
-        ax.set_xlabel("real episodes (summed over workers)")
-        ax.set_ylabel("moving return")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, loc="upper left")
+            name = PAPER_ALGOS.get(entry["algo"], entry["algo"])
+            curves[name] = (history["episodes"][0, 0], history["moving_return"][0])
+        level = levels.get(env) if levels else None
+        band_panel(ax, curves, env, level, "the top", legend_size=7)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path)

@@ -18,6 +18,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from experiments.paper import common, table2
+from experiments.plots import band_panel
 from ldn_jax.metrics import mean_band
 
 MAX_POINTS = 200
@@ -42,17 +43,8 @@ def figure(curves: dict, thresholds: dict[str, float], path: Path) -> None:
     envs = list(curves)
     fig, axes = plt.subplots(1, len(envs), figsize=(4.6 * len(envs), 3.8), dpi=120, squeeze=False)
     for ax, env in zip(axes[0], envs, strict=True):
-        for algo, (episodes, returns) in curves[env].items():
-            mean, low, high = mean_band(returns)
-            label = f"{common.PAPER_ALGOS.get(algo, algo)} ({returns.shape[0]} seeds)"
-            (line,) = ax.plot(episodes, mean, label=label)
-            ax.fill_between(episodes, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
-        ax.axhline(thresholds[env], color="grey", linestyle="--", linewidth=1, label="threshold")
-        ax.set_title(env)
-        ax.set_xlabel("real episodes (summed over workers)")
-        ax.set_ylabel("moving return")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, loc="upper left")
+        named = {common.PAPER_ALGOS.get(a, a): curve for a, curve in curves[env].items()}
+        band_panel(ax, named, env, thresholds[env], legend_size=7)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)

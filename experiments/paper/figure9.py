@@ -20,7 +20,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from experiments.paper import common
-from ldn_jax.metrics import mean_band
+from experiments.plots import band_panel
 
 K_VALUES = (0.5, 1.0, 2.0)
 LISTS = ("k", "final_moving_return", "episodes_to_threshold", "final_moving_returns")
@@ -65,27 +65,24 @@ def figure(entries: list[dict], panels: list[dict], path: Path) -> None:
         history = common.load_history(entry["dir"])
         episodes = history["episodes"][0, 0]
         threshold = data["threshold"]
+        curves = {
+            f"K={row['k']:g}": (episodes, history["moving_return"][ki])
+            for ki, row in enumerate(data["rows"])
+        }
+        title = f"MBRL-LDN on {data['env']} ({data['seeds']} seeds, mean and 95% band)"
+        band_panel(left, curves, title, threshold)
         for ki, row in enumerate(data["rows"]):
-            mean, low, high = mean_band(history["moving_return"][ki])
-            (line,) = left.plot(episodes, mean, label=f"K={row['k']:g}")
-            left.fill_between(episodes, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
             key = "episodes_to_threshold" if threshold is not None else "final_moving_returns"
             values = [v for v in row[key] if v is not None]
             if values:
                 right.boxplot([values], positions=[ki], widths=0.5, showfliers=False)
                 right.plot(ki + np.linspace(-0.12, 0.12, len(values)), values, ".", alpha=0.6)
         if threshold is not None:
-            left.axhline(threshold, color="grey", linestyle="--", linewidth=1, label="threshold")
             right.set_ylabel(f"episodes to moving return {threshold:g}")
             ticks = [f"K={r['k']:g}\n{r['reached']}/{r['runs']}" for r in data["rows"]]
         else:
             right.set_ylabel(f"moving return after {data['episodes']:,} episodes")
             ticks = [f"K={r['k']:g}" for r in data["rows"]]
-        left.set_title(f"MBRL-LDN on {data['env']} ({data['seeds']} seeds, mean and 95% band)")
-        left.set_xlabel("real episodes (summed over workers)")
-        left.set_ylabel("moving return")
-        left.legend(fontsize=8)
-        left.grid(alpha=0.3)
         right.set_xticks(range(len(data["rows"])), ticks)
         right.grid(alpha=0.3, axis="y")
     fig.tight_layout()

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import sys
+from dataclasses import dataclass, field
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
@@ -48,75 +49,142 @@ def algo_name(algo: str) -> str:
     return common.PAPER_ALGOS.get(algo, algo)
 
 
+# -- the records a section is made of, and their one renderer -------------------------------------
+
+
+@dataclass
+class Table:
+    """A markdown table: a header row and rows of already formatted cells."""
+
+    header: list[str]
+    rows: list[list[str]] = field(default_factory=list)
+
+
+@dataclass
+class Bullets:
+    items: list[str]
+
+
+@dataclass
+class Section:
+    """One `##` section of the report: its blocks (paragraphs, tables, bullet lists; figures
+    are linked from the paragraphs) and the findings it adds to the summary at the top."""
+
+    title: str
+    blocks: list[str | Table | Bullets] = field(default_factory=list)
+    findings: list[str] = field(default_factory=list)
+
+    @classmethod
+    def missing(cls, title: str, script: str) -> Section:
+        """A section whose result file is not there yet."""
+        return cls(title, [f"Not produced yet (run `{script}`)."])
+
+
+def markdown_table(table: Table) -> list[str]:
+    """`| a | b |` lines: the header, the separator, one line per row."""
+    line = lambda cells: "| " + " | ".join(cells) + " |"
+    return [line(table.header), "|" + "---|" * len(table.header), *map(line, table.rows)]
+
+
+def render_section(section: Section) -> list[str]:
+    lines = [f"## {section.title}", ""]
+    for block in section.blocks:
+        if isinstance(block, Table):
+            lines += markdown_table(block)
+        elif isinstance(block, Bullets):
+            lines += [f"- {item}" for item in block.items]
+        else:
+            lines.append(block)
+        lines.append("")
+    return lines
+
+
+def mann_whitney_p(x: list, y: list) -> float | None:
+    """Two-sided Mann-Whitney p over the values that are not None (None: too few, < 2 each).
+    The report's one significance test."""
+    x, y = [v for v in x if v is not None], [v for v in y if v is not None]
+    if len(x) < 2 or len(y) < 2:
+        return None
+    return float(stats.mannwhitneyu(x, y).pvalue)
+
+
+def mann_whitney(x: list, y: list) -> str:
+    p = mann_whitney_p(x, y)
+    return "too few runs to test" if p is None else f"Mann-Whitney p = {p:.2g}"
+
+
 # -- sections ------------------------------------------------------------------------------------
 
 
-def setup(data: dict, scale: common.Scale) -> list[str]:
+def setup(data: dict, scale: common.Scale) -> Section:
     first = next((d for d in data.values() if d), None)
     machine = first["machine"] if first else common.machine()
     flag = "--smoke" if scale.name == "smoke" else f"--scale {scale.name}"
     run = "make paper" + ("" if scale.name == "cpu" else f" SCALE={scale.name}")
     if scale.name == "smoke":
         run = "python experiments/paper/all.py --smoke"
-    lines = [
-        "## Setup",
-        "",
-        f"- Scale `{scale.name}`: {scale.seeds} seeds per run (vmapped: one compiled program per "
+    mujoco = (
+        f"{scale.mujoco_seeds} seeds per run; budgets "
+        + ", ".join(f"{env} {n:,} episodes" for env, n in scale.mujoco_episodes.items())
+        + "; the other tasks are pending at this scale."
+        if scale.mujoco_episodes
+        else "not run at this scale."
+    )
+    scripts = ("table2", "table3", "figure4", "figure5", "figure9", "calibration")
+    items = [
+        f"Scale `{scale.name}`: {scale.seeds} seeds per run (vmapped: one compiled program per "
         f"run), a budget of {scale.episodes:,} real episodes per seed (summed over "
         f"{scale.workers} synchronous workers), the `paper` preset (PAPER.md), K = 1 unless "
         "stated. Episodes to threshold count real episodes in completion order; a run that never "
         "reaches the threshold within the budget is left out of mean and s.d. and counted in "
         "*reached*.",
-        "- MuJoCo (Tables 4 and 5, Figure 9's MuJoCo panels): "
-        + (
-            f"{scale.mujoco_seeds} seeds per run; budgets "
-            + ", ".join(f"{env} {n:,} episodes" for env, n in scale.mujoco_episodes.items())
-            + "; the other tasks are pending at this scale."
-            if scale.mujoco_episodes
-            else "not run at this scale."
-        ),
-        f"- Machine: {machine['cpu']}, {machine['cores']} cores, JAX backend "
+        f"MuJoCo (Tables 4 and 5, Figure 9's MuJoCo panels): {mujoco}",
+        f"Machine: {machine['cpu']}, {machine['cores']} cores, JAX backend "
         f"{machine['jax_backend']}; jax {machine['jax']}, jaxlib {machine['jaxlib']}, Python "
         f"{machine['python']}; results dated {machine['date']}. The CPU was shared with other "
         "jobs, so seconds are indicative.",
-        f"- Commands: `{run}` (that is, `python experiments/paper/all.py {flag}`), "
+        f"Commands: `{run}` (that is, `python experiments/paper/all.py {flag}`), "
         "or one script at a time: "
-        + ", ".join(
-            f"`python experiments/paper/{n}.py {flag}`"
-            for n in ("table2", "table3", "figure4", "figure5", "figure9", "calibration")
-        )
+        + ", ".join(f"`python experiments/paper/{n}.py {flag}`" for n in scripts)
         + ", then `table4.py`, `table5.py` and `report.py` the same way. `--scale paper` "
         "raises the budget to 4,000 episodes and the calibration samples; `--smoke` is the "
         "tests' tiny budget. Training runs are kept under `runs/<scale>/` (not in git) and "
         "reused when their config matches.",
-        "",
     ]
-    return lines
+    return Section("Setup", [Bullets(items)])
 
 
-def table2_section(table: dict | None) -> tuple[list[str], list[str]]:
-    lines = ["## Table 2: episodes to threshold", ""]
-    if table is None:
-        return [*lines, "Not produced yet (run `table2.py`).", ""], []
-    lines += [
-        "Moving return m <- 0.99 m + 0.01 R reaching 150 (v0, v1) or 100 (v2). Ours: "
-        f"{table['seeds']} seeds, budget {table['episodes']:,} episodes. Box plot (the paper's "
-        "Figure 6): `table2/figure6.png`.",
-        "",
-        "| env | algorithm | ours: mean ± s.d. | min | max | reached | paper: mean ± s.d. |",
-        "|---|---|---|---|---|---|---|",
-    ]
+def _pending(r: dict, columns: int) -> list[str]:
+    """A table row for a run not done: env, algorithm, "pending", the rest empty."""
+    return [r["env"], algo_name(r["algo"]), "pending", *[""] * (columns - 3)]
+
+
+def table2_section(table: dict) -> Section:
+    rows = []
+    header = ["env", "algorithm", "ours: mean ± s.d.", "min", "max", "reached"]
+    header.append("paper: mean ± s.d.")
     for r in table["rows"]:
         if r["status"] != "done":
-            lines.append(f"| {r['env']} | {algo_name(r['algo'])} | pending | | | | |")
+            rows.append(_pending(r, len(header)))
             continue
-        lines.append(
-            f"| {r['env']} | {algo_name(r['algo'])} | {pm(r['mean'], r['sd'])} | "
-            f"{fmt(r['min'], 0)} | {fmt(r['max'], 0)} | {r['reached']}/{r['runs']} | "
-            f"{pm(r['paper_mean'], r['paper_sd'])} |"
+        rows.append(
+            [
+                r["env"],
+                algo_name(r["algo"]),
+                pm(r["mean"], r["sd"]),
+                fmt(r["min"], 0),
+                fmt(r["max"], 0),
+                f"{r['reached']}/{r['runs']}",
+                pm(r["paper_mean"], r["paper_sd"]),
+            ]
         )
-    lines.append("")
-    return lines, table2_findings(table["rows"])
+    intro = (
+        "Moving return m <- 0.99 m + 0.01 R reaching 150 (v0, v1) or 100 (v2). Ours: "
+        f"{table['seeds']} seeds, budget {table['episodes']:,} episodes. Box plot (the paper's "
+        "Figure 6): `table2/figure6.png`."
+    )
+    title = TITLES["table2"]
+    return Section(title, [intro, Table(header, rows)], table2_findings(table["rows"]))
 
 
 def _by_env(rows: list[dict]) -> dict[str, dict[str, dict]]:
@@ -134,11 +202,9 @@ PAPER_ORDER = ("ldn", "a2c-model", "a2c")
 def compare(a: dict, b: dict) -> str:
     """`a` vs `b` (rows with per-seed episodes): the difference of means and a two-sided
     Mann-Whitney p over the seeds that reached the threshold."""
-    x = [v for v in a["episodes_to_threshold"] if v is not None]
-    y = [v for v in b["episodes_to_threshold"] if v is not None]
-    if len(x) < 2 or len(y) < 2:
+    p = mann_whitney_p(a["episodes_to_threshold"], b["episodes_to_threshold"])
+    if p is None:
         return f"{algo_name(a['algo'])} vs {algo_name(b['algo'])}: too few runs reached"
-    p = stats.mannwhitneyu(x, y).pvalue
     paper = a["paper_mean"] < b["paper_mean"]
     ours = a["mean"] < b["mean"]
     agree = "as in the paper" if ours == paper else "unlike the paper"
@@ -184,33 +250,34 @@ def table2_findings(rows: list[dict]) -> list[str]:
     return findings
 
 
-def table3_section(table: dict | None) -> tuple[list[str], list[str]]:
-    lines = ["## Table 3: wall-clock seconds to threshold", ""]
-    if table is None:
-        return [*lines, "Not produced yet (run `table3.py`).", ""], []
+def table3_section(table: dict) -> Section:
     seeds = table["seeds"]
-    lines += [
+    intro = (
         f"From the Table 2 runs. *Batch seconds*: training wall time of the run ({seeds} seeds "
         "in one vmapped program) when a seed crossed, compilation excluded (given apart). "
         f"*Per seed*: batch seconds / {seeds}, what one seed costs if vmapping were free "
         "(a lower bound, not a measurement). The paper ran one agent with 8 asynchronous "
         "workers on its own machine; compare ratios between algorithms, not absolute values. "
-        "Figure: `table3/table3.png`.",
-        "",
-        "| env | algorithm | batch seconds: mean ± s.d. | per seed | compile s | real env "
-        "steps to threshold | paper seconds |",
-        "|---|---|---|---|---|---|---|",
-    ]
+        "Figure: `table3/table3.png`."
+    )
+    header = ["env", "algorithm", "batch seconds: mean ± s.d.", "per seed", "compile s"]
+    header += ["real env steps to threshold", "paper seconds"]
+    rows = []
     for r in table["rows"]:
         if r["status"] != "done":
-            lines.append(f"| {r['env']} | {algo_name(r['algo'])} | pending | | | | |")
+            rows.append(_pending(r, len(header)))
             continue
-        lines.append(
-            f"| {r['env']} | {algo_name(r['algo'])} | {pm(r['mean'], r['sd'])} | "
-            f"{pm(r['per_seed_mean'], r['per_seed_sd'], 2)} | {fmt(r['compile_seconds'])} | "
-            f"{fmt(r['env_steps_mean'], 0)} | {fmt(r['paper_seconds'])} |"
+        rows.append(
+            [
+                r["env"],
+                algo_name(r["algo"]),
+                pm(r["mean"], r["sd"]),
+                pm(r["per_seed_mean"], r["per_seed_sd"], 2),
+                fmt(r["compile_seconds"]),
+                fmt(r["env_steps_mean"], 0),
+                fmt(r["paper_seconds"]),
+            ]
         )
-    lines.append("")
     findings = []
     for env, algos in _by_env(table["rows"]).items():
         if "a2c" not in algos or algos["a2c"]["mean"] is None:
@@ -236,48 +303,47 @@ def table3_section(table: dict | None) -> tuple[list[str], list[str]]:
             f"Table 3, {env}: seconds relative to A3C: ours {', '.join(parts)}; paper "
             f"{', '.join(paper_parts)}: {verdict}."
         )
-    return lines, findings
+    title = TITLES["table3"]
+    return Section(title, [intro, Table(header, rows)], findings)
 
 
-def figure4_section(results: Path) -> list[str]:
-    lines = ["## Figure 4: learning curves", ""]
+def figure4_section(results: Path) -> Section:
+    title = TITLES["figure4"]
     if not (results / "figure4" / "figure4.png").exists():
-        return [*lines, "Not produced yet (run `figure4.py`).", ""]
-    return [
-        *lines,
+        return Section.missing(title, "figure4.py")
+    text = (
         "Moving return vs real episodes, mean and 95% band over seeds, per CartPole version "
-        "(the Table 2 runs): ![figure 4](figure4/figure4.png) (numbers: `figure4/figure4.csv`).",
-        "",
-    ]
+        "(the Table 2 runs): ![figure 4](figure4/figure4.png) (numbers: `figure4/figure4.csv`)."
+    )
+    return Section(title, [text])
 
 
-def figure5_section(data: dict | None) -> tuple[list[str], list[str]]:
-    lines = ["## Figure 5: learning degree over imagined steps", ""]
-    if data is None:
-        return [*lines, "Not produced yet (run `figure5.py`).", ""], []
-    lines += [
+def figure5_section(data: dict) -> Section:
+    intro = (
         f"{data['env']}, K = 1, the Table 2 runs. Training counts imagined steps per LD bin "
         "(width 0.1) every iteration (metric `ld_histogram`); x is the cumulative number of "
         f"imagined steps per seed (bins of {data['step_bin']}; counts of one iteration spread "
         "evenly over the steps it imagined) or the real env steps at which they were imagined. "
         "A2C-Model computes the same LD but does not stop on it. "
-        "![figure 5](figure5/figure5.png)",
-        "",
-        "| algorithm | imagined steps per seed | LD < 0.1 | LD >= 0.9 | LD >= 0.9 in the first "
-        "10k imagined steps | after 10k | mean LD, first / last 10 iterations |",
-        "|---|---|---|---|---|---|---|",
-    ]
+        "![figure 5](figure5/figure5.png)"
+    )
+    header = ["algorithm", "imagined steps per seed", "LD < 0.1", "LD >= 0.9"]
+    header += ["LD >= 0.9 in the first 10k imagined steps", "after 10k"]
+    header.append("mean LD, first / last 10 iterations")
     pct = lambda v: "–" if v is None else f"{100 * v:.1f}%"
-    for algo, d in data["runs"].items():
-        per_seed = d["imagined_steps_per_seed"]
-        lines.append(
-            f"| {algo_name(algo)} | {sum(per_seed) / len(per_seed):,.0f} | "
-            f"{pct(d['fraction_ld_below_0.1'])} | {pct(d['fraction_ld_at_least_0.9'])} | "
-            f"{pct(d['first_10k_fraction_ld_at_least_0.9'])} | "
-            f"{pct(d['after_10k_fraction_ld_at_least_0.9'])} | "
-            f"{d['ld_mean_first_iterations']:.3f} / {d['ld_mean_last_iterations']:.3f} |"
-        )
-    lines.append("")
+    per_seed = lambda d: sum(d["imagined_steps_per_seed"]) / len(d["imagined_steps_per_seed"])
+    rows = [
+        [
+            algo_name(algo),
+            f"{per_seed(d):,.0f}",
+            pct(d["fraction_ld_below_0.1"]),
+            pct(d["fraction_ld_at_least_0.9"]),
+            pct(d["first_10k_fraction_ld_at_least_0.9"]),
+            pct(d["after_10k_fraction_ld_at_least_0.9"]),
+            f"{d['ld_mean_first_iterations']:.3f} / {d['ld_mean_last_iterations']:.3f}",
+        ]
+        for algo, d in data["runs"].items()
+    ]
     findings = []
     ldn = data["runs"].get("ldn")
     if ldn:
@@ -290,9 +356,6 @@ def figure5_section(data: dict | None) -> tuple[list[str], list[str]]:
         )
         model = data["runs"].get("a2c-model")
         if model:
-            per_seed = lambda d: (
-                sum(d["imagined_steps_per_seed"]) / len(d["imagined_steps_per_seed"])
-            )
             findings.append(
                 f"Imagination: MBRL-LDN imagined {per_seed(ldn):,.0f} steps per seed over "
                 f"training, A3C-Model {per_seed(model):,.0f}: with LD this low MBRL-LDN is close "
@@ -303,45 +366,48 @@ def figure5_section(data: dict | None) -> tuple[list[str], list[str]]:
             f"LD went from {ldn['ld_mean_first_iterations']:.3f} to "
             f"{ldn['ld_mean_last_iterations']:.3f} ({'up' if rose else 'not up'}): {verdict}."
         )
-    return lines, findings
+    title = TITLES["figure5"]
+    return Section(title, [intro, Table(header, rows)], findings)
 
 
-def figure9_section(data: dict | None) -> tuple[list[str], list[str]]:
-    lines = ["## Figure 9: the gain K", ""]
-    if data is None:
-        return [*lines, "Not produced yet (run `figure9.py`).", ""], []
-    lines += [
+def figure9_section(data: dict) -> Section:
+    intro = (
         "MBRL-LDN with K in {0.5, 1, 2}, one vmapped run per env (the same initialisations for "
-        "every K). ![figure 9](figure9/figure9.png)",
-        "",
-    ]
-    findings = []
+        "every K). ![figure 9](figure9/figure9.png)"
+    )
+    section = Section(TITLES["figure9"], [intro])
     for panel in data["panels"]:
-        lines += figure9_table(panel)
-        findings += figure9_findings(panel)
-    for pending in data.get("pending", []):
-        lines.append(f"- {pending['env']}: pending ({pending['reason']}).")
-    if data.get("pending"):
-        lines.append("")
-    return lines, findings
+        section.blocks += [
+            f"**{panel['env']}** ({panel['seeds']} seeds, {panel['episodes']:,} episodes each):",
+            figure9_table(panel),
+        ]
+        section.findings += figure9_findings(panel)
+    pending = data.get("pending", [])
+    if pending:
+        section.blocks.append(Bullets([f"{p['env']}: pending ({p['reason']})." for p in pending]))
+    return section
 
 
-def figure9_table(panel: dict) -> list[str]:
-    lines = [
-        f"**{panel['env']}** ({panel['seeds']} seeds, {panel['episodes']:,} episodes each):",
-        "",
-        "| K | episodes to threshold: mean ± s.d. | min | max | reached | final moving return: "
-        "mean ± s.d. | imagined steps per seed | mean LD, last 10 iterations |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
+def figure9_table(panel: dict) -> Table:
+    header = ["K", "episodes to threshold: mean ± s.d.", "min", "max", "reached"]
+    header += ["final moving return: mean ± s.d.", "imagined steps per seed"]
+    header.append("mean LD, last 10 iterations")
+    rows = []
     for r in panel["rows"]:
         final = r["final_moving_return"]
-        lines.append(
-            f"| {r['k']:g} | {pm(r['mean'], r['sd'])} | {fmt(r['min'], 0)} | {fmt(r['max'], 0)} "
-            f"| {r['reached']}/{r['runs']} | {pm(final['mean'], final['sd'])} | "
-            f"{fmt(r['imagined_steps_per_seed'], 0)} | {r['ld_mean_last_iterations']:.3f} |"
+        rows.append(
+            [
+                f"{r['k']:g}",
+                pm(r["mean"], r["sd"]),
+                fmt(r["min"], 0),
+                fmt(r["max"], 0),
+                f"{r['reached']}/{r['runs']}",
+                pm(final["mean"], final["sd"]),
+                fmt(r["imagined_steps_per_seed"], 0),
+                f"{r['ld_mean_last_iterations']:.3f}",
+            ]
         )
-    return [*lines, ""]
+    return Table(header, rows)
 
 
 def figure9_findings(panel: dict) -> list[str]:
@@ -366,24 +432,18 @@ def figure9_findings(panel: dict) -> list[str]:
     text = ", ".join(f"K={k:g}: {m:.0f}" for k, m in means.items())
     tests, significant = [], False
     for k in means:
-        if k != best:
-            x = [v for v in rows[best][key] if v is not None]
-            y = [v for v in rows[k][key] if v is not None]
-            if len(x) > 1 and len(y) > 1:
-                p = stats.mannwhitneyu(x, y).pvalue
-                significant |= p < 0.05
-                tests.append(f"K={best:g} vs K={k:g}: p = {p:.2g}")
+        p = None if k == best else mann_whitney_p(rows[best][key], rows[k][key])
+        if p is not None:
+            significant |= p < 0.05
+            tests.append(f"K={best:g} vs K={k:g}: p = {p:.2g}")
     noise = f" (Mann-Whitney {'; '.join(tests)})" if tests else ""
     if tests and not significant:
         verdict += "; the differences are within seed-to-seed noise"
     return [f"Figure 9, {panel['env']}: {what} {text}; best K={best:g}{noise}: {verdict}."]
 
 
-def calibration_section(data: dict | None) -> tuple[list[str], list[str]]:
-    lines = ["## LD calibration: does the learning degree know when the model is wrong?", ""]
-    if data is None:
-        return [*lines, "Not produced yet (run `calibration.py`).", ""], []
-    lines += [
+def calibration_section(data: dict) -> Section:
+    intro = (
         f"MBRL-LDN on {data['env']}, K = 1, {data['seeds']} seeds, "
         f"{data['imagined_episodes_per_seed']} imagined episodes per seed at each point, played "
         "in M1 with the sampled policy from fresh initial states while the real JAX CartPole is "
@@ -395,184 +455,212 @@ def calibration_section(data: dict | None) -> tuple[list[str], list[str]]:
         "fitted from fresh initialisations on the final real buffer, as many steps as M1; its "
         "learning degree is "
         + data["ensemble_ld"]
-        + ". ![calibration](calibration/calibration.png)",
-        "",
-        "| episodes | steps | Spearman LD vs 1-step error | AUC of LD | AUC of 1 - LD | Pearson "
-        "LD vs 1-step | Spearman LD vs compounding | Spearman disagreement vs 1-step | AUC of "
-        "disagreement | mean LD | mean sigma2 | reward's share of sigma2 |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
-    ]
+        + ". ![calibration](calibration/calibration.png)"
+    )
     num = lambda v: "–" if v is None else f"{v:.3f}"
+    scores = Table(
+        [
+            "episodes",
+            "steps",
+            "Spearman LD vs 1-step error",
+            "AUC of LD",
+            "AUC of 1 - LD",
+            "Pearson LD vs 1-step",
+            "Spearman LD vs compounding",
+            "Spearman disagreement vs 1-step",
+            "AUC of disagreement",
+            "mean LD",
+            "mean sigma2",
+            "reward's share of sigma2",
+        ]
+    )
     for p in data["points"]:
         im = p["pooled"]["imagined"]
         one, comp = im["one_step_error"], im["compounding_error"]
         auc = one["ld"]["auc_error_above_median"]
-        lines.append(
-            f"| {p['episodes']:,} | {im['steps']:,} | {num(one['ld']['spearman'])} | {num(auc)} | "
-            f"{num(None if auc is None else 1 - auc)} | {num(one['ld']['pearson'])} | "
-            f"{num(comp['ld']['spearman'])} | {num(one['disagreement']['spearman'])} | "
-            f"{num(one['disagreement']['auc_error_above_median'])} | {num(im['ld']['mean'])} | "
-            f"{num(im['ld'].get('sigma2_mean'))} | {num(im['ld'].get('sigma2_reward_share'))} |"
+        scores.rows.append(
+            [
+                f"{p['episodes']:,}",
+                f"{im['steps']:,}",
+                num(one["ld"]["spearman"]),
+                num(auc),
+                num(None if auc is None else 1 - auc),
+                num(one["ld"]["pearson"]),
+                num(comp["ld"]["spearman"]),
+                num(one["disagreement"]["spearman"]),
+                num(one["disagreement"]["auc_error_above_median"]),
+                num(im["ld"]["mean"]),
+                num(im["ld"].get("sigma2_mean")),
+                num(im["ld"].get("sigma2_reward_share")),
+            ]
         )
-    lines += [
-        "",
+    horizons_intro = (
         "Imagined horizons (episode lengths in M1) under three stopping rules: predicted "
         "termination only (A3C-Model), the LD draw (MBRL-LDN), and the same draw with the "
-        "ensemble's learning degree:",
-        "",
-        "| episodes | predicted termination: mean / median / p90 | LD rule: mean / median / p90 "
-        "/ max | ensemble rule: mean / median | mean ensemble LD | ensemble final loss |",
-        "|---|---|---|---|---|---|",
-    ]
+        "ensemble's learning degree:"
+    )
+    horizons = Table(
+        [
+            "episodes",
+            "predicted termination: mean / median / p90",
+            "LD rule: mean / median / p90 / max",
+            "ensemble rule: mean / median",
+            "mean ensemble LD",
+            "ensemble final loss",
+        ]
+    )
     for p in data["points"]:
         h = p["pooled"]["horizons"]
         ens_ld = p["pooled"]["imagined"].get("ensemble_ld", {}).get("mean")
         a, b, c = h["predicted_termination"], h["ld_rule"], h["ensemble_rule"]
-        lines.append(
-            f"| {p['episodes']:,} | {a['mean']:.1f} / {a['median']:.0f} / {a['p90']:.0f} | "
-            f"{b['mean']:.2f} / {b['median']:.0f} / {b['p90']:.0f} / {b['max']} | "
-            f"{c['mean']:.1f} / {c['median']:.0f} | {num(ens_ld)} | "
-            f"{p['ensemble']['final_loss_mean']:.2e} |"
+        horizons.rows.append(
+            [
+                f"{p['episodes']:,}",
+                f"{a['mean']:.1f} / {a['median']:.0f} / {a['p90']:.0f}",
+                f"{b['mean']:.2f} / {b['median']:.0f} / {b['p90']:.0f} / {b['max']}",
+                f"{c['mean']:.1f} / {c['median']:.0f}",
+                num(ens_ld),
+                f"{p['ensemble']['final_loss_mean']:.2e}",
+            ]
         )
-    lines.append("")
     sources = "; ".join(f"{p['episodes']:,}: {p['source']}" for p in data["points"])
-    lines += [f"Sources of the states: {sources}.", ""]
+    blocks = [intro, scores, horizons_intro, horizons, f"Sources of the states: {sources}."]
     training = data.get("training", [])
     if training:
-        lines += [
+        blocks.append(
             "Training with each estimator (the same config and seeds; `--ld ensemble` with "
-            f"E = {training[-1]['ensemble_members']} members):",
-            "",
-            "| learning degree | episodes to threshold: mean ± s.d. | min | max | reached | "
-            "mean LD, last 10 iterations | imagined steps per real step | train s |",
-            "|---|---|---|---|---|---|---|---|",
+            f"E = {training[-1]['ensemble_members']} members):"
+        )
+        header = ["learning degree", "episodes to threshold: mean ± s.d.", "min", "max"]
+        header += ["reached", "mean LD, last 10 iterations", "imagined steps per real step"]
+        header.append("train s")
+        rows = [
+            [
+                "M1 vs M0 (the paper)" if r["ld"] == "m0" else "ensemble disagreement",
+                pm(r["mean"], r["sd"]),
+                fmt(r["min"], 0),
+                fmt(r["max"], 0),
+                f"{r['reached']}/{r['runs']}",
+                f"{r['ld_mean_last_iterations']:.3f}",
+                f"{r['imagined_steps_per_real_step']:.2f}",
+                f"{r['train_seconds']:.0f}",
+            ]
+            for r in training
         ]
-        for r in training:
-            name = "M1 vs M0 (the paper)" if r["ld"] == "m0" else "ensemble disagreement"
-            lines.append(
-                f"| {name} | {pm(r['mean'], r['sd'])} | {fmt(r['min'], 0)} | {fmt(r['max'], 0)} "
-                f"| {r['reached']}/{r['runs']} | {r['ld_mean_last_iterations']:.3f} | "
-                f"{r['imagined_steps_per_real_step']:.2f} | {r['train_seconds']:.0f} |"
-            )
-        lines.append("")
+        blocks.append(Table(header, rows))
+    title = TITLES["calibration"]
+    return Section(title, blocks, calibration_findings(data))
+
+
+def calibration_findings(data: dict) -> list[str]:
+    training = data.get("training", [])
     findings = []
     last = data["points"][-1]
     one = last["pooled"]["imagined"]["one_step_error"]
     auc = one["ld"]["auc_error_above_median"]
-    if auc is not None:
-        if auc < 0.45:
-            how = "LD is lower where the model is more wrong, as the method assumes"
-        elif auc > 0.55:
-            how = "LD is HIGHER where the model is more wrong, the opposite of the method's premise"
-        else:
-            how = "LD barely separates high-error from low-error steps"
-        d_auc = one["disagreement"]["auc_error_above_median"]
-        ens = ""
-        if d_auc is not None:
-            flags = "it flags high error" if d_auc > 0.55 else "it does not flag high error"
-            ens = f"; the ensemble disagreement's AUC is {d_auc:.3f} ({flags})"
-        h = last["pooled"]["horizons"]["ld_rule"]
-        for population, where in (
-            ("ld_rule", "the steps MBRL-LDN imagines"),
-            ("imagined", "whole imagined episodes (run to predicted termination)"),
-        ):
-            ld = last["pooled"][population]["ld"]
-            if not ld.get("sigma2_mean"):
-                continue
-            # tanh(K sigma2 / 2) = 0.9 at K sigma2 = 2 artanh(0.9) = 2.944.
-            findings.append(
-                f"Why LD stays low ({where}, {last['episodes']:,} episodes): M1 deviates from "
-                f"M0 by sigma2 = {ld['sigma2_mean']:.3f} on average, "
-                f"{100 * ld['sigma2_reward_share']:.0f}% of it in the reward output; LD = "
-                f"tanh(K sigma2 / 2) averages {ld['mean']:.3f}, so a step stops with "
-                f"probability about {1 - ld['mean']:.2f}. LD = 0.9 at that sigma2 would need "
-                f"K = {2.944 / ld['sigma2_mean']:.0f}."
-            )
-        ens_ld = last["pooled"]["imagined"].get("ensemble_ld", {}).get("mean")
-        if ens_ld is not None:
-            e = last["pooled"]["horizons"]["ensemble_rule"]
-            findings.append(
-                f"Ensemble learning degree (the estimator of `--ld ensemble`, K = 1, "
-                f"disagreement relative to the members' fit error) at {last['episodes']:,} "
-                f"episodes: it averages {ens_ld:.3f} over imagined steps (M1-vs-M0 LD: "
-                f"{last['pooled']['imagined']['ld']['mean']:.3f}), so its rule imagines "
-                f"{e['mean']:.1f} steps per episode on average (median {e['median']:.0f}) "
-                f"against the LD rule's {h['mean']:.2f}."
-            )
-        rows = {r["ld"]: r for r in training}
-        if {"m0", "ensemble"} <= set(rows) and rows["m0"]["mean"] and rows["ensemble"]["mean"]:
-            ours, trained = rows["m0"], rows["ensemble"]
-            test = _mann_whitney(ours["episodes_to_threshold"], trained["episodes_to_threshold"])
-            cost = trained["train_seconds"] / max(ours["train_seconds"], 1e-9)
-            per_step = "imagined_steps_per_real_step"
-            findings.append(
-                f"Training with the ensemble learning degree on {data['env']}: "
-                f"{trained['mean']:.0f} ± {trained['sd'] or 0:.0f} episodes to threshold "
-                f"({trained['reached']}/{trained['runs']} reached) vs {ours['mean']:.0f} ± "
-                f"{ours['sd'] or 0:.0f} with M1 vs M0 ({test}); it imagines "
-                f"{trained[per_step]:.2f} steps per real step (M1 vs M0: "
-                f"{ours[per_step]:.2f}) at {cost:.1f}x the training time."
-            )
+    if auc is None:
+        return findings
+    if auc < 0.45:
+        how = "LD is lower where the model is more wrong, as the method assumes"
+    elif auc > 0.55:
+        how = "LD is HIGHER where the model is more wrong, the opposite of the method's premise"
+    else:
+        how = "LD barely separates high-error from low-error steps"
+    d_auc = one["disagreement"]["auc_error_above_median"]
+    ens = ""
+    if d_auc is not None:
+        flags = "it flags high error" if d_auc > 0.55 else "it does not flag high error"
+        ens = f"; the ensemble disagreement's AUC is {d_auc:.3f} ({flags})"
+    h = last["pooled"]["horizons"]["ld_rule"]
+    for population, where in (
+        ("ld_rule", "the steps MBRL-LDN imagines"),
+        ("imagined", "whole imagined episodes (run to predicted termination)"),
+    ):
+        ld = last["pooled"][population]["ld"]
+        if not ld.get("sigma2_mean"):
+            continue
+        # tanh(K sigma2 / 2) = 0.9 at K sigma2 = 2 artanh(0.9) = 2.944.
         findings.append(
-            f"LD calibration at {last['episodes']:,} episodes: AUC of LD for high one-step error "
-            f"{auc:.3f} (1 - LD: {1 - auc:.3f}): {how}{ens}. The LD rule's imagined episodes "
-            f"last {h['mean']:.2f} steps on average (median {h['median']:.0f})."
+            f"Why LD stays low ({where}, {last['episodes']:,} episodes): M1 deviates from "
+            f"M0 by sigma2 = {ld['sigma2_mean']:.3f} on average, "
+            f"{100 * ld['sigma2_reward_share']:.0f}% of it in the reward output; LD = "
+            f"tanh(K sigma2 / 2) averages {ld['mean']:.3f}, so a step stops with "
+            f"probability about {1 - ld['mean']:.2f}. LD = 0.9 at that sigma2 would need "
+            f"K = {2.944 / ld['sigma2_mean']:.0f}."
         )
-    return lines, findings
+    ens_ld = last["pooled"]["imagined"].get("ensemble_ld", {}).get("mean")
+    if ens_ld is not None:
+        e = last["pooled"]["horizons"]["ensemble_rule"]
+        findings.append(
+            f"Ensemble learning degree (the estimator of `--ld ensemble`, K = 1, "
+            f"disagreement relative to the members' fit error) at {last['episodes']:,} "
+            f"episodes: it averages {ens_ld:.3f} over imagined steps (M1-vs-M0 LD: "
+            f"{last['pooled']['imagined']['ld']['mean']:.3f}), so its rule imagines "
+            f"{e['mean']:.1f} steps per episode on average (median {e['median']:.0f}) "
+            f"against the LD rule's {h['mean']:.2f}."
+        )
+    rows = {r["ld"]: r for r in training}
+    if {"m0", "ensemble"} <= set(rows) and rows["m0"]["mean"] and rows["ensemble"]["mean"]:
+        ours, trained = rows["m0"], rows["ensemble"]
+        test = mann_whitney(ours["episodes_to_threshold"], trained["episodes_to_threshold"])
+        cost = trained["train_seconds"] / max(ours["train_seconds"], 1e-9)
+        per_step = "imagined_steps_per_real_step"
+        findings.append(
+            f"Training with the ensemble learning degree on {data['env']}: "
+            f"{trained['mean']:.0f} ± {trained['sd'] or 0:.0f} episodes to threshold "
+            f"({trained['reached']}/{trained['runs']} reached) vs {ours['mean']:.0f} ± "
+            f"{ours['sd'] or 0:.0f} with M1 vs M0 ({test}); it imagines "
+            f"{trained[per_step]:.2f} steps per real step (M1 vs M0: "
+            f"{ours[per_step]:.2f}) at {cost:.1f}x the training time."
+        )
+    findings.append(
+        f"LD calibration at {last['episodes']:,} episodes: AUC of LD for high one-step error "
+        f"{auc:.3f} (1 - LD: {1 - auc:.3f}): {how}{ens}. The LD rule's imagined episodes "
+        f"last {h['mean']:.2f} steps on average (median {h['median']:.0f})."
+    )
+    return findings
 
 
-def _p_value(x: list, y: list) -> float | None:
-    """Two-sided Mann-Whitney p over the values that are not None (None: too few)."""
-    x, y = [v for v in x if v is not None], [v for v in y if v is not None]
-    if len(x) < 2 or len(y) < 2:
-        return None
-    return float(stats.mannwhitneyu(x, y).pvalue)
-
-
-def _mann_whitney(x: list, y: list) -> str:
-    p = _p_value(x, y)
-    return "too few runs to test" if p is None else f"Mann-Whitney p = {p:.2g}"
-
-
-def _pending_rows(table: dict) -> list[str]:
+def _pending_note(table: dict) -> list[str]:
     pending = [r for r in table["rows"] if r["status"] != "done"]
     if not pending:
         return []
     names = sorted({r["env"] for r in pending}, key=[r["env"] for r in pending].index)
     reason = pending[0]["reason"].removeprefix(f"{pending[0]['env']} ")
-    return [f"Pending at this scale ({reason}): {', '.join(names)}.", ""]
+    return [f"Pending at this scale ({reason}): {', '.join(names)}."]
 
 
-def table4_section(table: dict | None) -> tuple[list[str], list[str]]:
-    lines = ["## Table 4: MuJoCo, A3C-Model vs MBRL-LDN", ""]
-    if table is None:
-        return [*lines, "Not produced yet (run `table4.py`).", ""], []
-    lines += [
+def table4_section(table: dict) -> Section:
+    intro = (
         f'Final moving return (our reading of "total moving reward"), {table["seeds"]} seeds '
         "per run, continuous actions through MJX (the model predicts standardised state deltas; "
         "README). The paper's values exceed what some tasks can score, so compare the two "
-        "algorithms, not the values. Curves: ![table 4](table4/table4.png)",
-        "",
-        "| env | algorithm | episodes per seed | env steps per seed | final moving return: "
-        "mean ± s.d. | min | max | greedy eval return | paper |",
-        "|---|---|---|---|---|---|---|---|---|",
-    ]
+        "algorithms, not the values. Curves: ![table 4](table4/table4.png)"
+    )
+    header = ["env", "algorithm", "episodes per seed", "env steps per seed"]
+    header += ["final moving return: mean ± s.d.", "min", "max", "greedy eval return", "paper"]
     done = [r for r in table["rows"] if r["status"] == "done"]
-    for r in done:
-        lines.append(
-            f"| {r['env']} | {algo_name(r['algo'])} | {r['episodes']:,} | "
-            f"{fmt(r['env_steps_per_seed'], 0)} | {pm(r['mean'], r['sd'])} | {fmt(r['min'])} | "
-            f"{fmt(r['max'])} | {pm(r['eval_return']['mean'], r['eval_return']['sd'])} | "
-            f"{fmt(r['paper'])} |"
-        )
-    lines += ["", *_pending_rows(table)]
+    rows = [
+        [
+            r["env"],
+            algo_name(r["algo"]),
+            f"{r['episodes']:,}",
+            fmt(r["env_steps_per_seed"], 0),
+            pm(r["mean"], r["sd"]),
+            fmt(r["min"]),
+            fmt(r["max"]),
+            pm(r["eval_return"]["mean"], r["eval_return"]["sd"]),
+            fmt(r["paper"]),
+        ]
+        for r in done
+    ]
     findings = []
     for env, algos in _by_env(done).items():
         if set(algos) != {"a2c-model", "ldn"}:
             continue
         model, ldn = algos["a2c-model"], algos["ldn"]
         x, y = ldn["final_moving_returns"], model["final_moving_returns"]
-        p, test = _p_value(x, y), _mann_whitney(x, y)
+        p, test = mann_whitney_p(x, y), mann_whitney(x, y)
         if p is None or p >= 0.05:
             verdict = "no significant difference (the paper: MBRL-LDN higher): NOT reproduced"
         elif ldn["mean"] > model["mean"]:
@@ -584,75 +672,117 @@ def table4_section(table: dict | None) -> tuple[list[str], list[str]]:
             f"A3C-Model {model['mean']:.1f} final moving return ({test}; paper "
             f"{ldn['paper']} vs {model['paper']}): {verdict}."
         )
-    return lines, findings
+    title = TITLES["table4"]
+    return Section(title, [intro, Table(header, rows), *_pending_note(table)], findings)
 
 
-def table5_section(table: dict | None) -> tuple[list[str], list[str]]:
-    lines = ["## Table 5: MuJoCo, PPO2 vs PPO2-Model vs PPO2-LDN", ""]
-    if table is None:
-        return [*lines, "Not produced yet (run `table5.py`).", ""], []
-    lines += [
+def table5_section(table: dict) -> Section:
+    intro = (
         f"Episodes to reach the top; the paper does not define the top, ours is {table['top']} "
         f"(the dashed line in the figure). {table['seeds']} seeds per run. Curves: "
-        "![table 5](table5/table5.png)",
-        "",
-        "| env | algorithm | the top | episodes to the top: mean ± s.d. | min | max | reached "
-        "| final moving return | greedy eval return | paper |",
-        "|---|---|---|---|---|---|---|---|---|---|",
-    ]
+        "![table 5](table5/table5.png)"
+    )
+    header = ["env", "algorithm", "the top", "episodes to the top: mean ± s.d.", "min", "max"]
+    header += ["reached", "final moving return", "greedy eval return", "paper"]
     done = [r for r in table["rows"] if r["status"] == "done"]
-    for r in done:
-        final, ev = r["final_moving_return"], r["eval_return"]
-        lines.append(
-            f"| {r['env']} | {algo_name(r['algo'])} | {r['top']:.0f} | {pm(r['mean'], r['sd'])} "
-            f"| {fmt(r['min'], 0)} | {fmt(r['max'], 0)} | {r['reached']}/{r['runs']} | "
-            f"{pm(final['mean'], final['sd'])} | {pm(ev['mean'], ev['sd'])} | {fmt(r['paper'])} |"
-        )
-    lines += ["", *_pending_rows(table)]
-    findings = []
-    for env, algos in _by_env(done).items():
-        means = {a: r["mean"] for a, r in algos.items() if r["mean"] is not None}
-        if not means:
-            findings.append(f"Table 5, {env}: no run reached the top within the budget.")
-            continue
-        order = sorted(means, key=means.get)
-        ours = " < ".join(f"{algo_name(a)} ({means[a]:.0f})" for a in order)
-        reached = ", ".join(f"{algo_name(a)} {r['reached']}/{r['runs']}" for a, r in algos.items())
-        verdict = (
-            "REPRODUCED (PPO2-LDN fewest, as in the paper)"
-            if order[0] == "ppo-ldn" and len(means) == len(algos)
-            else "NOT reproduced (the paper: PPO2-LDN fewest)"
-        )
-        final = {a: r["final_moving_return"]["mean"] for a, r in algos.items()}
-        unreached = [a for a, r in algos.items() if r["reached"] == 0]
-        unreached = (
-            "; never reached the top: "
-            + ", ".join(f"{algo_name(a)} (final moving return {final[a]:.0f})" for a in unreached)
-            if unreached
+    rows = [
+        [
+            r["env"],
+            algo_name(r["algo"]),
+            f"{r['top']:.0f}",
+            pm(r["mean"], r["sd"]),
+            fmt(r["min"], 0),
+            fmt(r["max"], 0),
+            f"{r['reached']}/{r['runs']}",
+            pm(r["final_moving_return"]["mean"], r["final_moving_return"]["sd"]),
+            pm(r["eval_return"]["mean"], r["eval_return"]["sd"]),
+            fmt(r["paper"]),
+        ]
+        for r in done
+    ]
+    findings = [table5_finding(env, algos) for env, algos in _by_env(done).items()]
+    title = TITLES["table5"]
+    return Section(title, [intro, Table(header, rows), *_pending_note(table)], findings)
+
+
+def table5_finding(env: str, algos: dict[str, dict]) -> str:
+    means = {a: r["mean"] for a, r in algos.items() if r["mean"] is not None}
+    if not means:
+        return f"Table 5, {env}: no run reached the top within the budget."
+    order = sorted(means, key=means.get)
+    ours = " < ".join(f"{algo_name(a)} ({means[a]:.0f})" for a in order)
+    reached = ", ".join(f"{algo_name(a)} {r['reached']}/{r['runs']}" for a, r in algos.items())
+    verdict = (
+        "REPRODUCED (PPO2-LDN fewest, as in the paper)"
+        if order[0] == "ppo-ldn" and len(means) == len(algos)
+        else "NOT reproduced (the paper: PPO2-LDN fewest)"
+    )
+    final = {a: r["final_moving_return"]["mean"] for a, r in algos.items()}
+    unreached = [a for a, r in algos.items() if r["reached"] == 0]
+    unreached = (
+        "; never reached the top: "
+        + ", ".join(f"{algo_name(a)} (final moving return {final[a]:.0f})" for a in unreached)
+        if unreached
+        else ""
+    )
+    tests = "; ".join(
+        f"PPO2-LDN vs {algo_name(a)}: "
+        + mann_whitney(algos["ppo-ldn"]["episodes_to_top"], algos[a]["episodes_to_top"])
+        for a in ("ppo", "ppo-model")
+        if a in algos and "ppo-ldn" in algos
+    )
+    imagined = ", ".join(
+        f"{algo_name(a)} {r['imagined_steps_per_seed']:,.0f}"
+        + (
+            f" (mean LD {r['ld_mean_last_iterations']:.2f})"
+            if r.get("ld_mean_last_iterations") is not None and a.endswith("ldn")
             else ""
         )
-        tests = "; ".join(
-            f"PPO2-LDN vs {algo_name(a)}: "
-            + _mann_whitney(algos["ppo-ldn"]["episodes_to_top"], algos[a]["episodes_to_top"])
-            for a in ("ppo", "ppo-model")
-            if a in algos and "ppo-ldn" in algos
-        )
-        imagined = ", ".join(
-            f"{algo_name(a)} {r['imagined_steps_per_seed']:,.0f}"
-            + (
-                f" (mean LD {r['ld_mean_last_iterations']:.2f})"
-                if r.get("ld_mean_last_iterations") is not None and a.endswith("ldn")
-                else ""
-            )
-            for a, r in algos.items()
-            if r.get("imagined_steps_per_seed")
-        )
-        imagined = f" Imagined steps per seed: {imagined}." if imagined else ""
-        findings.append(
-            f"Table 5, {env}: mean episodes to the top {ours} ({tests}). Reached: "
-            f"{reached}{unreached}: {verdict}.{imagined}"
-        )
-    return lines, findings
+        for a, r in algos.items()
+        if r.get("imagined_steps_per_seed")
+    )
+    imagined = f" Imagined steps per seed: {imagined}." if imagined else ""
+    return (
+        f"Table 5, {env}: mean episodes to the top {ours} ({tests}). Reached: "
+        f"{reached}{unreached}: {verdict}.{imagined}"
+    )
+
+
+SECTIONS = (
+    ("table2", table2_section),
+    ("table3", table3_section),
+    ("figure4", None),  # a figure only: `figure4_section` looks for it
+    ("figure5", figure5_section),
+    ("figure9", figure9_section),
+    ("calibration", calibration_section),
+    ("table4", table4_section),
+    ("table5", table5_section),
+)
+"""The report's sections in order: result name -> builder of its `Section` from the result."""
+
+TITLES = {
+    "table2": "Table 2: episodes to threshold",
+    "figure4": "Figure 4: learning curves",
+    "table3": "Table 3: wall-clock seconds to threshold",
+    "figure5": "Figure 5: learning degree over imagined steps",
+    "figure9": "Figure 9: the gain K",
+    "calibration": "LD calibration: does the learning degree know when the model is wrong?",
+    "table4": "Table 4: MuJoCo, A3C-Model vs MBRL-LDN",
+    "table5": "Table 5: MuJoCo, PPO2 vs PPO2-Model vs PPO2-LDN",
+}
+"""Every section's title."""
+
+
+def sections(results: Path, data: dict) -> list[Section]:
+    out = []
+    for name, build in SECTIONS:
+        if build is None:
+            out.append(figure4_section(results))
+        elif data[name] is None:
+            out.append(Section.missing(TITLES[name], f"{name}.py"))
+        else:
+            out.append(build(data[name]))
+    return out
 
 
 def render(results: Path, scale: common.Scale) -> str:
@@ -661,34 +791,20 @@ def render(results: Path, scale: common.Scale) -> str:
     made = {d["scale"] for d in data.values() if d}
     if len(made) == 1:
         scale = common.SCALES[made.pop()]
-    t2, f2 = table2_section(data["table2"])
-    t3, f3 = table3_section(data["table3"])
-    f5, g5 = figure5_section(data["figure5"])
-    f9, g9 = figure9_section(data["figure9"])
-    cal, gc = calibration_section(data["calibration"])
-    t4, g4 = table4_section(data["table4"])
-    t5, gt5 = table5_section(data["table5"])
-    findings = [*f2, *f3, *g5, *g9, *gc, *g4, *gt5]
+    body = sections(results, data)
+    summary = Section(
+        "What reproduced and what did not",
+        [Bullets([f for section in body for f in section.findings])],
+    )
     lines = [
         "# Reproduction report: MBRL-LDN on CartPole and MuJoCo",
         "",
         "Generated by `experiments/paper/report.py` from the result files beside it; do not "
         "edit by hand. The paper's numbers are those of `shared/PAPER.md`.",
         "",
-        *setup(data, scale),
-        "## What reproduced and what did not",
-        "",
-        *[f"- {f}" for f in findings],
-        "",
-        *t2,
-        *t3,
-        *figure4_section(results),
-        *f5,
-        *f9,
-        *cal,
-        *t4,
-        *t5,
     ]
+    for section in (setup(data, scale), summary, *body):
+        lines += render_section(section)
     return "\n".join(lines)
 
 

@@ -182,8 +182,7 @@ class ActorCritic:
     """The paper's actor (softmax or Gaussian policy) and critic; a learner adds its loss and
     update.
 
-    Subclasses set `self.optimizer` and implement
-    `update(state, segment, key) -> (state, losses)`.
+    Subclasses set `self.optimizer` and implement `update`, all with one signature.
     """
 
     optimizer: object
@@ -226,3 +225,11 @@ class ActorCritic:
 
     def log_prob_entropy(self, params: dict, obs: Array, action: Array) -> tuple[Array, Array]:
         return self.policy.log_prob_entropy(self.logits(params, obs), action)
+
+    def update(
+        self, state: LearnerState, segment: Segment, key: Array | None = None
+    ) -> tuple[LearnerState, dict]:
+        """Learn from one segment `[W, n]` of masked steps: `(new state, losses)`; a fully
+        masked segment leaves `state` unchanged. `key`: for learners that draw (PPO's
+        minibatch shuffle); a deterministic one ignores it."""
+        raise NotImplementedError

@@ -160,13 +160,16 @@ class PPO(ActorCritic):
         return keep_if_any(new, state, batch.weight), (info, batch.weight.sum() > 0)
 
     def update(
-        self, state: LearnerState, segment: Segment, key: Array
+        self, state: LearnerState, segment: Segment, key: Array | None = None
     ) -> tuple[LearnerState, dict]:
         """`epochs` passes of `minibatches` shuffled minibatches over one segment's rows.
 
         The row count is padded with weight-0 rows to a multiple of `minibatches`, so any
-        W x n works. Returns the losses averaged over minibatches that had live rows.
+        W x n works. Returns the losses averaged over minibatches that had live rows. `key`
+        shuffles the rows, so PPO needs one.
         """
+        if key is None:
+            raise ValueError("PPO's update shuffles minibatches: pass a PRNG key")
         cfg = self.config
         batch = self.batch(state.params, canonical(segment))
         rows = batch.weight.shape[0]

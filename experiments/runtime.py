@@ -1,0 +1,124 @@
+"""Runtime setup: the persistent compile cache, multi-host start, the device mesh, and the
+compiled training chunk (with `--dry-run`'s report of what it costs)."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from pathlib import Path
+
+import jax
+
+from experiments.flags import UsageError
+from ldn_jax import sharding
+from ldn_jax.config import Config
+from ldn_jax.train import Trainer
+
+
+def default_compile_cache() -> Path:
+    """Per user: $XDG_CACHE_HOME/ldn-jax/jax-cache, else ~/.cache/ldn-jax/jax-cache."""
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "ldn-jax" / "jax-cache"
+
+
+def enable_compile_cache(spec: str | None) -> Path | None:
+    """Turn on JAX's persistent compilation cache in `spec` (None: the default directory;
+    "none": off). A later process that compiles the same program loads it from there."""
+    if spec == "none":
+        return None
+    path = Path(spec).expanduser() if spec else default_compile_cache()
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise UsageError(f"cannot use --compile-cache {path}: {error.strerror or error}") from None
+    jax.config.update("jax_compilation_cache_dir", str(path))
+    # The defaults skip programs that compile in under a second and small entries; on CPU
+    # the many small programs (eager init ops) add up to seconds, so cache everything.
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
+    return path
+
+
+def initialize_distributed(args: argparse.Namespace) -> None:
+    try:
+        sharding.initialize_distributed(args.coordinator, args.num_processes, args.process_id)
+    except (RuntimeError, ValueError) as error:
+        reason = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
+        raise UsageError(f"--distributed: {reason}") from None
+
+
+def device_mesh(args: argparse.Namespace, seeds: int):
+    """The mesh that `--devices` asks for, or None for one device (no sharding)."""
+    spec = args.devices or ("all" if args.distributed else "1")
+    if spec == "all":
+        count = None
+    else:
+        try:
+            count = int(spec)
+        except ValueError:
+            raise UsageError(f"--devices must be a number or 'all', got {spec!r}") from None
+        if count < 1:
+            raise UsageError(f"--devices must be >= 1 or 'all', got {count}")
+    if count == 1:
+        return None
+    try:
+        mesh = sharding.seed_mesh(count)
+        if args.distributed and mesh.size != jax.device_count():
+            everyone = jax.device_count()
+            raise ValueError(f"--distributed uses every device ({everyone}); drop --devices")
+        sharding.check_divisible(seeds, mesh)
+    except ValueError as error:
+        raise UsageError(f"--devices {spec}: {error}") from None
+    return mesh if mesh.size > 1 else None
+
+
+def compile_chunk(
+    trainer: Trainer, states, k, mesh=None, bitwise: bool = False
+) -> tuple[object, float, float]:
+    """`(compiled chunk, lower seconds, compile seconds)`; `states` may be abstract.
+
+    Lowering (tracing) always runs; XLA's compile is what the persistent cache skips.
+    """
+    start = time.perf_counter()
+    lowered = trainer.batched_chunk(mesh, bitwise).lower(states, k)
+    lowered_at = time.perf_counter()
+    compiled = lowered.compile()
+    return compiled, lowered_at - start, time.perf_counter() - lowered_at
+
+
+def dry_run(config: Config, mesh=None, cache: Path | None = None, bitwise: bool = False) -> dict:
+    """Compile the chunk program without computing anything and print what it costs."""
+    trainer = Trainer(config)
+    states = sharding.abstract(jax.eval_shape(trainer.init_batch), mesh)
+    k = trainer.k_values() if mesh is None else sharding.replicate(trainer.k_values(), mesh)
+    compiled, lower_s, compile_s = compile_chunk(trainer, states, k, mesh, bitwise)
+    cost = compiled.cost_analysis()
+    cost = (cost[0] if isinstance(cost, list | tuple) else cost) or {}
+    memory = compiled.memory_analysis()
+    report = {
+        "compile_seconds": round(lower_s + compile_s, 3),
+        "lower_seconds": round(lower_s, 3),
+        "xla_compile_seconds": round(compile_s, 3),
+        "flops": float(cost.get("flops", float("nan"))),
+        "bytes_accessed": float(cost.get("bytes accessed", float("nan"))),
+        "argument_bytes": memory.argument_size_in_bytes,
+        "output_bytes": memory.output_size_in_bytes,
+        "alias_bytes": memory.alias_size_in_bytes,
+        "temp_bytes": memory.temp_size_in_bytes,
+    }
+    devices = 1 if mesh is None else mesh.size
+    batch = f"{config.seeds} seeds" + (f" x {len(config.k)} K" if config.uses_k else "")
+    mb = lambda n: f"{n / 2**20:,.1f} MB"
+    print(
+        f"dry run: {config.env} {config.algo}, {batch} on {devices} device(s), "
+        f"{config.chunk_iterations} iterations per chunk; nothing written\n"
+        f"compile: {report['compile_seconds']:.2f} s (trace and lower {lower_s:.2f} s, XLA "
+        f"{compile_s:.2f} s; cache: {cache or 'off'})\n"
+        f"cost per chunk, XLA's static count (each loop body once, whatever its trip count): "
+        f"{report['flops']:.3g} FLOPs, {report['bytes_accessed']:.3g} bytes accessed\n"
+        f"memory per device: arguments {mb(report['argument_bytes'])} (donated: aliased "
+        f"{mb(report['alias_bytes'])}), outputs {mb(report['output_bytes'])}, temporaries "
+        f"{mb(report['temp_bytes'])}"
+    )
+    return report

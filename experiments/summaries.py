@@ -1,0 +1,173 @@
+"""What a run reports: metrics lines, the live status, warnings, summary.json, curves.png and
+the closing line. Numpy in, plain data out; the run directory writes it."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import numpy as np
+
+from experiments.plots import learning_curves
+from ldn_jax import sharding
+from ldn_jax.config import Config
+from ldn_jax.metrics import threshold_crossing
+from ldn_jax.run_dir import RunDir
+from ldn_jax.train import failure_names
+
+LOSS_SUFFIXES = ("_loss", "_entropy", "_approx_kl", "_clip_fraction")
+"""Metrics written under "losses" in metrics.jsonl."""
+
+
+def run_name(config: Config, ki: int, seed: int) -> str:
+    """How messages name one run of the batch: `seed 1 K=0.5`, or `seed 1` where K is unused."""
+    return f"seed {seed}" + (f" K={config.k[ki]:g}" if config.uses_k else "")
+
+
+def metric_lines(
+    config: Config, metrics: dict, wall_seconds: float, first_iteration: int
+) -> list[str]:
+    """One JSON line per K, seed and iteration of a chunk's metrics `[K, S, N, ...]`.
+
+    `iteration` counts the host's iterations from `first_iteration`, so a run frozen by the
+    non-finite guard still numbers its lines like the others.
+    """
+    lines = []
+    losses = [name for name in metrics if name.endswith(LOSS_SUFFIXES)]
+    n_k, seeds, n_iter = metrics["iteration"].shape
+    for ki in range(n_k):
+        for seed in range(seeds):
+            for i in range(n_iter):
+                at = lambda name, index=(ki, seed, i): metrics[name][index]
+                line = {
+                    "iteration": first_iteration + i,
+                    "seed": seed,
+                    "k": config.k[ki],
+                    "episodes": int(at("episodes")),
+                    "env_steps": int(at("env_steps")),
+                    "imagined_steps": int(at("imagined_steps")),
+                    "episode_return": float(at("episode_return")),
+                    "moving_return": float(at("moving_return")),
+                    "ld_mean": finite_or_none(at("ld_mean")) if "ld_mean" in metrics else None,
+                    "losses": {name: finite_or_none(at(name)) for name in losses},
+                    "wall_seconds": round(wall_seconds, 3),
+                }
+                lines.append(json.dumps(line))
+    return lines
+
+
+def finite_or_none(value) -> float | None:
+    value = float(value)
+    return value if np.isfinite(value) else None
+
+
+def status(metrics: dict, train_seconds: float) -> str:
+    """The live display's text after a chunk."""
+    steps = int(metrics["env_steps"].sum(axis=(0, 1))[-1])
+    text = f"moving return {np.nanmean(metrics['moving_return'][..., -1]):7.1f}"
+    if "ld_mean" in metrics:
+        text += f"  LD {np.nanmean(metrics['ld_mean'][..., -1]):.3f}"
+    return text + f"  {steps / max(train_seconds, 1e-9):,.0f} env steps/s"
+
+
+def report_failures(config: Config, failure: np.ndarray | None, reported: set) -> set:
+    """One stderr line per run of `failure [K, S]` that newly became non-finite; returns all
+    reported so far."""
+    if failure is None:
+        return reported
+    for ki, seed in zip(*np.nonzero(failure), strict=True):
+        if (ki, seed) not in reported:
+            what = ", ".join(failure_names(int(failure[ki, seed])))
+            print(
+                f"warning: {run_name(config, ki, seed)}: non-finite {what}; this run is "
+                "frozen at its last finite state, the others go on",
+                file=sys.stderr,
+            )
+            reported = reported | {(ki, seed)}
+    return reported
+
+
+def summarize(config: Config, history: dict, eval_returns, states, session: dict) -> dict:
+    """summary.json's contents from the whole history `{name: [K, S, N, ...]}`."""
+    threshold = config.resolved_threshold
+    chunk_ends = session["chunk_ends"]
+    train_seconds = chunk_ends[-1]
+    failure, failed_iteration = sharding.to_host((states.failure, states.failed_iteration))
+    total_steps = int(history["env_steps"][..., -1].sum())
+    runs = []
+    per_chunk = config.chunk_iterations
+    for ki, k in enumerate(config.k):
+        for seed in range(config.seeds):
+            crossing = None
+            if threshold is not None:
+                crossing = threshold_crossing(
+                    history["moving_after"][ki, seed],
+                    history["lengths"][ki, seed],
+                    history["env_steps"][ki, seed],
+                    threshold,
+                )
+            seconds = None
+            if crossing is not None:
+                # Wall time of the whole vmapped batch, pro rata within the crossing's chunk.
+                chunk, within = divmod(crossing[2], per_chunk)
+                begin = chunk_ends[chunk - 1] if chunk else 0.0
+                seconds = begin + (chunk_ends[chunk] - begin) * (within + 1) / per_chunk
+            runs.append(
+                {
+                    "seed": seed,
+                    "k": k,
+                    "episodes_to_threshold": crossing[0] if crossing else None,
+                    "env_steps_to_threshold": crossing[1] if crossing else None,
+                    "seconds_to_threshold": round(seconds, 3) if seconds else None,
+                    "final_moving_return": finite_or_none(history["moving_return"][ki, seed, -1]),
+                    "eval_return": float(eval_returns[ki, seed]),
+                    "diverged": None
+                    if failure[ki, seed] == 0
+                    else {
+                        "iteration": int(failed_iteration[ki, seed]),
+                        "quantities": failure_names(int(failure[ki, seed])),
+                    },
+                }
+            )
+    return {
+        "env": config.env,
+        "algo": config.algo,
+        "backend": config.backend,
+        "threshold": threshold,
+        "compile_seconds": round(session["compile_seconds"], 3),
+        "train_seconds": round(train_seconds, 3),
+        "env_steps_per_second": round(total_steps / train_seconds, 1),
+        "imagined_steps": int(history["imagined_steps"][..., -1].sum()),
+        "resumes": session["resumes"],
+        "runs": runs,
+    }
+
+
+def plot_curves(config: Config, history: dict, run: RunDir) -> None:
+    """curves.png: the moving return of each K (mean and band over seeds)."""
+    episodes = history["episodes"][0, 0]
+    curves = {
+        (f"{config.algo} K={k:g}" if len(config.k) > 1 else config.algo): (
+            episodes,
+            history["moving_return"][ki],
+        )
+        for ki, k in enumerate(config.k)
+    }
+    learning_curves(
+        curves, run.curves_file, f"{config.env}: {config.algo}", config.resolved_threshold
+    )
+
+
+def closing_lines(config: Config, summary: dict, run: RunDir) -> None:
+    """What a finished run prints: runs that reached the threshold, times, where the files are."""
+    reached = [r for r in summary["runs"] if r["episodes_to_threshold"] is not None]
+    print(
+        f"{config.env} {config.algo}: {len(reached)}/{len(summary['runs'])} runs reached "
+        f"{summary['threshold']}; compile {summary['compile_seconds']:.1f}s, "
+        f"train {summary['train_seconds']:.1f}s, "
+        f"{summary['env_steps_per_second']:,.0f} env steps/s"
+    )
+    diverged = [r for r in summary["runs"] if r["diverged"]]
+    if diverged:
+        print(f"{len(diverged)} run(s) diverged and were frozen: see summary.json", file=sys.stderr)
+    print(f"curves:  {run.curves_file}\nsummary: {run.summary_file}")

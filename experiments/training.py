@@ -1,0 +1,201 @@
+"""The host loop: run compiled chunks, write metrics and checkpoints between them, stop
+cleanly on a signal, evaluate and summarise at the end.
+
+    summary = train(config, out, TrainOptions(checkpoint_every=10, quiet=True))
+    summary = train(config, out, checkpoint_every=10, quiet=True)   # the same
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import signal
+import sys
+import time
+from pathlib import Path
+
+import jax
+import numpy as np
+
+from experiments import summaries
+from experiments.loggers import Logger, NullLogger
+from experiments.runtime import compile_chunk
+from ldn_jax import sharding
+from ldn_jax.config import Config
+from ldn_jax.run_dir import FINAL, RunDir
+from ldn_jax.train import Trainer
+
+
+class Interrupted(Exception):
+    """Training stopped on request after a checkpoint; `--resume` continues it."""
+
+    def __init__(self, signum: int, chunks_done: int, chunks: int):
+        super().__init__(f"stopped after chunk {chunks_done}/{chunks}")
+        self.signum, self.chunks_done, self.chunks = signum, chunks_done, chunks
+
+
+class Stop:
+    """SIGINT/SIGTERM set a flag; the loop finishes its chunk, checkpoints and stops.
+
+    A second signal acts at once (the default handler), for a user who cannot wait.
+    """
+
+    def __init__(self):
+        self.signum: int | None = None
+
+    def install(self) -> Stop:
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signum, self._handle)
+        return self
+
+    def _handle(self, signum, frame) -> None:
+        self.signum = signum
+        signal.signal(signum, signal.SIG_DFL)
+
+    def requested(self, chunks_done: int) -> bool:
+        return self.signum is not None
+
+
+@dataclasses.dataclass
+class TrainOptions:
+    """How to train a config, as opposed to what: none of this changes a number."""
+
+    checkpoint_every: int = 20
+    """Chunks between checkpoints (0: only the final one)."""
+    quiet: bool = False
+    """No live progress display."""
+    stop: Stop | None = None
+    """Asked between chunks whether to checkpoint and raise `Interrupted` (None: never)."""
+    resume: bool = False
+    """Continue from the newest whole checkpoint in the run directory."""
+    logger: Logger | None = None
+    """An extra metric sink (TensorBoard ...) beside metrics.jsonl."""
+    mesh: object = None
+    """`ldn_jax.sharding.seed_mesh` to split the seeds over its devices; None: one device."""
+    bitwise: bool | None = None
+    """A device with a single seed computes it twice (`ldn_jax.sharding.shard_seeds`);
+    None: as the run being resumed was (else False)."""
+
+
+def train(config: Config, out: Path, options: TrainOptions | None = None, **fields) -> dict:
+    """Train (or, with `options.resume`, continue) the run in `out`; returns the summary.
+
+    `fields` set `TrainOptions` fields directly. Across hosts only process 0 writes files.
+    Raises `Interrupted` after checkpointing when `options.stop` asks for it between chunks,
+    `ldn_jax.run_dir.RunDirError` (one line) for a run directory it cannot use or write.
+    """
+    if options is not None and not isinstance(options, TrainOptions):
+        raise TypeError(f"options must be TrainOptions, got {options!r} (or pass fields by name)")
+    options = dataclasses.replace(options or TrainOptions(), **fields)
+    run, mesh = RunDir(out), options.mesh
+    writer = jax.process_index() == 0
+    trainer = Trainer(config)
+    chunks = config.iterations // config.chunk_iterations
+    history: dict[str, list[np.ndarray]] = {}
+    session = {"chunks_done": 0, "chunk_ends": [], "compile_seconds": None, "resumes": 0}
+    if options.resume and writer:
+        run.remove_partial_checkpoints()
+    found, skipped = (None, [])
+    if options.resume:
+        found, skipped = run.load_latest(jax.eval_shape(trainer.init_batch))
+    for reason in skipped:
+        print(f"warning: {reason}; resuming from {found.name} instead", file=sys.stderr)
+    if found is not None:
+        states, session = found.states, found.session
+        history = {name: [values] for name, values in found.history.items()}
+        session["resumes"] += 1
+    else:
+        if writer:
+            run.write_config(config)
+        states = trainer.init_batch()
+    bitwise = session.get("bitwise", False) if options.bitwise is None else options.bitwise
+    session["bitwise"] = bitwise
+    if writer:
+        run.truncate_metrics(session["chunks_done"] * config.chunk_iterations)
+    last_failure = history["failure"][-1][..., -1] if history.get("failure") else None
+    reported = summaries.report_failures(config, last_failure, set())
+    k = trainer.k_values()
+    if mesh is not None:
+        states, k = sharding.place(states, mesh), sharding.replicate(k, mesh)
+
+    if session["chunks_done"] < chunks:
+        logger = options.logger or NullLogger()
+        episodes = lambda: session["chunks_done"] * config.chunk_iterations * config.workers
+        progress = Progress(config.iterations * config.workers, options.quiet or not writer)
+        progress.update(episodes(), "compiling...")
+        chunk_fn, lower_s, compile_s = compile_chunk(trainer, states, k, mesh, bitwise)
+        if session["compile_seconds"] is None:
+            session["compile_seconds"] = lower_s + compile_s
+        train_seconds = session["chunk_ends"][-1] if session["chunk_ends"] else 0.0
+        stop = options.stop or Stop()  # one never installed asks for nothing
+        try:
+            with run.metrics_writer(writer) as log:  # processes other than 0 write nothing
+                for chunk in range(session["chunks_done"], chunks):
+                    t0 = time.perf_counter()
+                    states, metrics = chunk_fn(states, k)
+                    metrics = sharding.to_host(metrics)
+                    train_seconds += time.perf_counter() - t0
+                    session["chunk_ends"].append(train_seconds)
+                    session["chunks_done"] = chunk + 1
+                    for name, value in metrics.items():
+                        history.setdefault(name, []).append(value)
+                    first = chunk * config.chunk_iterations + 1
+                    log.write(summaries.metric_lines(config, metrics, train_seconds, first))
+                    logger.log(config, metrics, train_seconds)
+                    failure = metrics["failure"][..., -1]
+                    reported = summaries.report_failures(config, failure, reported)
+                    progress.update(episodes(), summaries.status(metrics, train_seconds))
+                    last = chunk + 1 == chunks
+                    due = options.checkpoint_every and (chunk + 1) % options.checkpoint_every == 0
+                    # Across hosts all stop together: the checkpoint is a collective save.
+                    stopping = not last and sharding.any_process(stop.requested(chunk + 1))
+                    if not last and (due or stopping):
+                        name = f"chunk_{chunk + 1:05d}"
+                        run.save_checkpoint(name, states, history, session, writer)
+                    if stopping:
+                        raise Interrupted(stop.signum or signal.SIGINT, chunk + 1, chunks)
+        finally:
+            progress.stop()
+            logger.close()
+        run.save_checkpoint(FINAL, states, history, session, writer)
+
+    eval_key = jax.random.key(config.seeds + 10_000)
+    if mesh is not None:
+        eval_key = sharding.replicate(eval_key, mesh)
+    eval_returns = sharding.to_host(trainer.batched_evaluate(mesh, bitwise)(states, eval_key))
+    history = {name: np.concatenate(parts, axis=2) for name, parts in history.items()}
+    summary = summaries.summarize(config, history, eval_returns, states, session)
+    summary["devices"] = 1 if mesh is None else mesh.size
+    summary["bitwise"] = bitwise
+    if writer:
+        run.write_summary(summary)
+        summaries.plot_curves(config, history, run)
+    return summary
+
+
+class Progress:
+    """Live display of episodes, moving return, LD and throughput (rich), or nothing."""
+
+    def __init__(self, total: int, quiet: bool):
+        self.quiet = quiet
+        if quiet:
+            return
+        from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
+        from rich.progress import Progress as RichProgress
+
+        self.bar = RichProgress(
+            TextColumn("[bold]episodes"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            TextColumn("{task.fields[status]}"),
+        )
+        self.task = self.bar.add_task("train", total=total, status="compiling...")
+        self.bar.start()
+
+    def update(self, episodes: int, status: str) -> None:
+        if not self.quiet:
+            self.bar.update(self.task, completed=episodes, status=status)
+
+    def stop(self) -> None:
+        if not self.quiet:
+            self.bar.stop()
