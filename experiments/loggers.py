@@ -13,6 +13,7 @@ from typing import Protocol
 import numpy as np
 
 from ldn_jax.config import Config
+from ldn_jax.run_dir import RunDir
 
 LOGGERS = ("none", "tensorboard")
 
@@ -49,7 +50,7 @@ class TensorBoardLogger:
     def __init__(self, run_dir: Path):
         from tensorboardX import SummaryWriter  # optional extra: ldn-jax[tensorboard]
 
-        self.log_dir = Path(run_dir) / "tensorboard"
+        self.log_dir = RunDir(run_dir).tensorboard_dir
         self.writer = SummaryWriter(str(self.log_dir))
         self.start = time.time()
 

@@ -5,6 +5,7 @@
     DIR/summary.json         written once training and the final evaluation are done
     DIR/curves.png           moving return against episodes
     DIR/eval.json            `ldn-jax eval`'s gymnasium evaluations, one entry per seed and K
+    DIR/tensorboard/         with `--logger tensorboard`
     DIR/checkpoints/NAME/    the batched `TrainState` (orbax), NAME = chunk_00020 ... or final
     DIR/checkpoints/NAME.host.npz   beside it: history, session timings, the manifest
     DIR/.lock                held (flock) by the training process that writes here
@@ -108,6 +109,10 @@ class RunDir:
     @property
     def eval_file(self) -> Path:
         return self.path / "eval.json"
+
+    @property
+    def tensorboard_dir(self) -> Path:
+        return self.path / "tensorboard"
 
     @property
     def checkpoints(self) -> Path:
