@@ -42,6 +42,7 @@ CONFIG_FLAGS = {
     "seeds": "seeds",
     "k": "k",
     "episodes": "episodes",
+    "steps": "steps",
     "workers": "workers",
     "preset": "preset",
     "threshold": "threshold",
@@ -65,6 +66,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         type=int,
         help=f"real episodes per seed and K (default {d.episodes}; inverted_pendulum 800, other "
         "MuJoCo tasks 16: CPU budgets, raise them on a GPU)",
+    )
+    p.add_argument(
+        "--steps",
+        type=int,
+        help="instead of --episodes: real env steps per seed and K, summed over workers; each "
+        "run stops at the first iteration that reaches them (MuJoCo's natural unit)",
     )
     p.add_argument(
         "--backend",
@@ -144,6 +151,8 @@ def build_config(args: argparse.Namespace) -> Config:
     run's `auto` backend resolved. `UsageError` for anything impossible."""
     if args.ensemble_size is not None and args.ld != "ensemble":
         raise UsageError("--ensemble-size needs --ld ensemble")
+    if args.steps is not None and args.episodes is not None:
+        raise UsageError("give --steps or --episodes, not both (one budget per run)")
     overrides: dict = {}
     for flag, field in CONFIG_FLAGS.items():
         value = getattr(args, flag)

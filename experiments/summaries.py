@@ -133,6 +133,9 @@ def summarize(config: Config, history: dict, eval_returns, states, session: dict
         "env": config.env,
         "algo": config.algo,
         "backend": config.backend,
+        "budget": {"steps": config.steps} if config.steps else {"episodes": config.episodes},
+        "real_episodes": int(history["episodes"][..., -1].sum()),
+        "env_steps": total_steps,
         "threshold": threshold,
         "compile_seconds": round(session["compile_seconds"], 3),
         "train_seconds": round(train_seconds, 3),
@@ -144,27 +147,37 @@ def summarize(config: Config, history: dict, eval_returns, states, session: dict
 
 
 def plot_curves(config: Config, history: dict, run: RunDir) -> None:
-    """curves.png: the moving return of each K (mean and band over seeds)."""
-    episodes = history["episodes"][0, 0]
+    """curves.png: the moving return after every real episode, in completion order (mean and
+    band over seeds), one line per K; a run of a few iterations still draws a curve."""
+    after = history["moving_after"]  # [K, S, N, W]
+    n_k, seeds = after.shape[:2]
+    returns = after.reshape(n_k, seeds, -1)
+    episodes = np.arange(1, returns.shape[-1] + 1)
     curves = {
-        (f"{config.algo} K={k:g}" if len(config.k) > 1 else config.algo): (
-            episodes,
-            history["moving_return"][ki],
-        )
+        (f"{config.algo} K={k:g}" if len(config.k) > 1 else config.algo): (episodes, returns[ki])
         for ki, k in enumerate(config.k)
     }
-    learning_curves(
-        curves, run.curves_file, f"{config.env}: {config.algo}", config.resolved_threshold
-    )
+    title = f"{config.env}: {config.algo}"
+    learning_curves(curves, run.curves_file, title, config.resolved_threshold)
 
 
 def closing_lines(config: Config, summary: dict, run: RunDir) -> None:
     """What a finished run prints: runs that reached the threshold, times, where the files are."""
-    reached = [r for r in summary["runs"] if r["episodes_to_threshold"] is not None]
+    runs = summary["runs"]
+    if summary["threshold"] is not None:
+        reached = [r for r in runs if r["episodes_to_threshold"] is not None]
+        outcome = f"{len(reached)}/{len(runs)} runs reached {summary['threshold']}"
+    else:  # no threshold to reach: what the runs ended at
+        final = [r["final_moving_return"] for r in runs if r["final_moving_return"] is not None]
+        final_text = f"{np.mean(final):,.1f}" if final else "none finite"
+        evals = np.mean([r["eval_return"] for r in runs])
+        outcome = (
+            f"final moving return {final_text}, greedy eval return {evals:,.1f} "
+            f"(means over {len(runs)} runs)"
+        )
     print(
-        f"{config.env} {config.algo}: {len(reached)}/{len(summary['runs'])} runs reached "
-        f"{summary['threshold']}; compile {summary['compile_seconds']:.1f}s, "
-        f"train {summary['train_seconds']:.1f}s, "
+        f"{config.env} {config.algo}: {outcome}; compile {summary['compile_seconds']:.1f}s, "
+        f"train {summary['train_seconds']:.1f}s, eval {summary['eval_seconds']:.1f}s, "
         f"{summary['env_steps_per_second']:,.0f} env steps/s"
     )
     diverged = [r for r in summary["runs"] if r["diverged"]]

@@ -105,6 +105,7 @@ def train(config: Config, out: Path, options: TrainOptions | None = None, **fiel
         session["resumes"] += 1
     else:
         if writer:
+            run.path.mkdir(parents=True, exist_ok=True)
             run.write_config(config)
         states = trainer.init_batch()
     bitwise = session.get("bitwise", False) if options.bitwise is None else options.bitwise
@@ -117,53 +118,31 @@ def train(config: Config, out: Path, options: TrainOptions | None = None, **fiel
     if mesh is not None:
         states, k = sharding.place(states, mesh), sharding.replicate(k, mesh)
 
-    if session["chunks_done"] < chunks:
-        logger = options.logger or NullLogger()
-        episodes = lambda: session["chunks_done"] * config.chunk_iterations * config.workers
-        progress = Progress(config.iterations * config.workers, options.quiet or not writer)
-        progress.update(episodes(), "compiling...")
-        chunk_fn, lower_s, compile_s = compile_chunk(trainer, states, k, mesh, bitwise)
-        if session["compile_seconds"] is None:
-            session["compile_seconds"] = lower_s + compile_s
-        train_seconds = session["chunk_ends"][-1] if session["chunk_ends"] else 0.0
-        stop = options.stop or Stop()  # one never installed asks for nothing
-        try:
-            with run.metrics_writer(writer) as log:  # processes other than 0 write nothing
-                for chunk in range(session["chunks_done"], chunks):
-                    t0 = time.perf_counter()
-                    states, metrics = chunk_fn(states, k)
-                    metrics = sharding.to_host(metrics)
-                    train_seconds += time.perf_counter() - t0
-                    session["chunk_ends"].append(train_seconds)
-                    session["chunks_done"] = chunk + 1
-                    for name, value in metrics.items():
-                        history.setdefault(name, []).append(value)
-                    first = chunk * config.chunk_iterations + 1
-                    log.write(summaries.metric_lines(config, metrics, train_seconds, first))
-                    logger.log(config, metrics, train_seconds)
-                    failure = metrics["failure"][..., -1]
-                    reported = summaries.report_failures(config, failure, reported)
-                    progress.update(episodes(), summaries.status(metrics, train_seconds))
-                    last = chunk + 1 == chunks
-                    due = options.checkpoint_every and (chunk + 1) % options.checkpoint_every == 0
-                    # Across hosts all stop together: the checkpoint is a collective save.
-                    stopping = not last and sharding.any_process(stop.requested(chunk + 1))
-                    if not last and (due or stopping):
-                        name = f"chunk_{chunk + 1:05d}"
-                        run.save_checkpoint(name, states, history, session, writer)
-                    if stopping:
-                        raise Interrupted(stop.signum or signal.SIGINT, chunk + 1, chunks)
-        finally:
-            progress.stop()
-            logger.close()
-        run.save_checkpoint(FINAL, states, history, session, writer)
-
-    eval_key = jax.random.key(config.seeds + 10_000)
-    if mesh is not None:
-        eval_key = sharding.replicate(eval_key, mesh)
-    eval_returns = sharding.to_host(trainer.batched_evaluate(mesh, bitwise)(states, eval_key))
+    done = lambda: session["chunks_done"] >= chunks or budget_spent(config, history)
+    progress = Progress(config, options.quiet or not writer)
+    progress.update(history, "compiling..." if not done() else "evaluating...")
+    try:
+        if not done():
+            chunk_fn, lower_s, compile_s = compile_chunk(trainer, states, k, mesh, bitwise)
+            if session["compile_seconds"] is None:
+                session["compile_seconds"] = lower_s + compile_s
+            loop = (chunk_fn, states, k, history, session, progress, reported)
+            states = _train_chunks(config, options, run, *loop)
+        if found is None or found.name != FINAL:
+            run.save_checkpoint(FINAL, states, history, session, writer)
+        progress.update(history, f"evaluating: {config.eval_episodes} greedy episodes per run...")
+        eval_key = jax.random.key(config.seeds + 10_000)
+        if mesh is not None:
+            eval_key = sharding.replicate(eval_key, mesh)
+        t0 = time.perf_counter()
+        evaluate = trainer.batched_evaluate(mesh, bitwise)
+        eval_returns = sharding.to_host(evaluate(states, eval_key))
+        eval_seconds = time.perf_counter() - t0
+    finally:
+        progress.stop()
     history = {name: np.concatenate(parts, axis=2) for name, parts in history.items()}
     summary = summaries.summarize(config, history, eval_returns, states, session)
+    summary["eval_seconds"] = round(eval_seconds, 3)  # its compile included
     summary["devices"] = 1 if mesh is None else mesh.size
     summary["bitwise"] = bitwise
     if writer:
@@ -172,29 +151,93 @@ def train(config: Config, out: Path, options: TrainOptions | None = None, **fiel
     return summary
 
 
-class Progress:
-    """Live display of episodes, moving return, LD and throughput (rich), or nothing."""
+def _train_chunks(config, options, run, chunk_fn, states, k, history, session, progress, reported):
+    """Run chunks until the budget is spent, writing metrics and checkpoints between them;
+    returns the states. `history` and `session` are updated in place."""
+    writer = jax.process_index() == 0
+    logger = options.logger or NullLogger()
+    stop = options.stop or Stop()  # one never installed asks for nothing
+    chunks = config.iterations // config.chunk_iterations
+    train_seconds = session["chunk_ends"][-1] if session["chunk_ends"] else 0.0
+    try:
+        with run.metrics_writer(writer) as log:  # processes other than 0 write nothing
+            for chunk in range(session["chunks_done"], chunks):
+                t0 = time.perf_counter()
+                states, metrics = chunk_fn(states, k)
+                metrics = sharding.to_host(metrics)
+                train_seconds += time.perf_counter() - t0
+                session["chunk_ends"].append(train_seconds)
+                session["chunks_done"] = chunk + 1
+                for name, value in metrics.items():
+                    history.setdefault(name, []).append(value)
+                first = chunk * config.chunk_iterations + 1
+                log.write(summaries.metric_lines(config, metrics, train_seconds, first))
+                logger.log(config, metrics, train_seconds)
+                failure = metrics["failure"][..., -1]
+                reported = summaries.report_failures(config, failure, reported)
+                progress.update(history, summaries.status(metrics, train_seconds))
+                last = chunk + 1 == chunks or budget_spent(config, history)
+                due = options.checkpoint_every and (chunk + 1) % options.checkpoint_every == 0
+                # Across hosts all stop together: the checkpoint is a collective save.
+                stopping = not last and sharding.any_process(stop.requested(chunk + 1))
+                if not last and (due or stopping):
+                    name = f"chunk_{chunk + 1:05d}"
+                    run.save_checkpoint(name, states, history, session, writer)
+                if stopping:
+                    raise Interrupted(stop.signum or signal.SIGINT, chunk + 1, chunks)
+                if last:
+                    break
+    finally:
+        logger.close()
+    return states
 
-    def __init__(self, total: int, quiet: bool):
-        self.quiet = quiet
+
+def budget_spent(config: Config, history: dict) -> bool:
+    """With a `steps` budget: whether every run has reached it (or was frozen by the
+    non-finite guard) by the last chunk in `history`."""
+    if config.steps is None or not history.get("env_steps"):
+        return False
+    steps, failure = history["env_steps"][-1][..., -1], history["failure"][-1][..., -1]
+    return bool(((steps >= config.steps) | (failure != 0)).all())
+
+
+class Progress:
+    """Live display (rich) of the budget spent, moving return, LD, throughput and the phase
+    (compiling, training, evaluating), or nothing when quiet."""
+
+    def __init__(self, config: Config, quiet: bool):
+        self.config, self.quiet = config, quiet
         if quiet:
             return
         from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
         from rich.progress import Progress as RichProgress
 
+        unit = "episodes" if config.steps is None else "env steps"
         self.bar = RichProgress(
-            TextColumn("[bold]episodes"),
+            TextColumn(f"[bold]{unit}"),
             BarColumn(),
             MofNCompleteColumn(),
             TimeElapsedColumn(),
             TextColumn("{task.fields[status]}"),
         )
+        total = config.iterations * config.workers if config.steps is None else config.steps
         self.task = self.bar.add_task("train", total=total, status="compiling...")
         self.bar.start()
 
-    def update(self, episodes: int, status: str) -> None:
-        if not self.quiet:
-            self.bar.update(self.task, completed=episodes, status=status)
+    def update(self, history: dict, status: str) -> None:
+        """Show the budget spent by the chunks in `history` (per run: episodes, or the mean
+        env steps over runs, capped at the budget) and `status`."""
+        if self.quiet:
+            return
+        if self.config.steps is None:
+            iterations = sum(part.shape[2] for part in history.get("episodes", []))
+            spent = iterations * self.config.workers
+        elif history.get("env_steps"):
+            steps = history["env_steps"][-1][..., -1]
+            spent = int(np.minimum(steps, self.config.steps).mean())
+        else:
+            spent = 0
+        self.bar.update(self.task, completed=spent, status=status)
 
     def stop(self) -> None:
         if not self.quiet:

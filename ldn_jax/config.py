@@ -147,7 +147,11 @@ class Config:
     stop by the learning degree keeps only the first (`from_preset`): K does nothing there."""
     episodes: int = 1600
     """Real episodes per seed and K, summed over workers (`from_preset`: `DEFAULT_EPISODES`
-    where an env has its own)."""
+    where an env has its own). Ignored when `steps` is set."""
+    steps: int | None = None
+    """Budget in real env steps per seed and K, summed over workers, instead of `episodes`
+    (the natural unit where early episodes last 5 steps and late ones 1,000): each run stops
+    at the first iteration that reaches it, the batch once every run has."""
     workers: int = 8
     """Synchronous workers (vmapped); one real and one imagined episode each per iteration."""
     backend: str = "auto"
@@ -206,9 +210,12 @@ class Config:
 
     @property
     def iterations(self) -> int:
-        """Iterations needed for `episodes` real episodes, rounded up to whole chunks."""
+        """Iterations needed for `episodes` real episodes, rounded up to whole chunks; with a
+        `steps` budget, the most it can take (every episode one step long): runs stop as
+        they reach it, usually far sooner."""
         per_chunk = self.workers * self.chunk_iterations
-        return math.ceil(self.episodes / per_chunk) * self.chunk_iterations
+        real_episodes = self.episodes if self.steps is None else self.steps
+        return math.ceil(real_episodes / per_chunk) * self.chunk_iterations
 
     @property
     def resolved_threshold(self) -> float | None:
@@ -305,6 +312,7 @@ def validate(config: Config) -> Config:
         ),
         (len(set(config.k)) == len(config.k), f"K values must be distinct: {config.k}"),
         (config.episodes >= 1, f"episodes must be >= 1, got {config.episodes}"),
+        (config.steps is None or config.steps >= 1, f"steps must be >= 1, got {config.steps}"),
         (config.workers >= 1, f"workers must be >= 1, got {config.workers}"),
         (
             config.backend in BACKEND_CHOICES,

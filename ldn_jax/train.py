@@ -189,9 +189,10 @@ class Trainer:
         state from then on (frozen) and `failure` says what diverged; other vmapped runs go on.
         """
         new, metrics = self._iteration(state, gain)
+        spent = self.spent(state)  # its budget was reached: this iteration does not count
         failure = self._failure(new, metrics)
-        first = (state.failure == 0) & (failure != 0)
-        frozen = (state.failure != 0) | first
+        first = (state.failure == 0) & (failure != 0) & ~spent
+        frozen = (state.failure != 0) | first | spent
         kept = jax.tree.map(lambda n, o: jnp.where(frozen, o, n), new, state)
         state = kept.replace(
             failure=jnp.where(first, failure, state.failure),
@@ -207,6 +208,12 @@ class Trainer:
             failure=state.failure,
         )
         return state, metrics
+
+    def spent(self, state: TrainState) -> Array:
+        """Whether a run has reached its `config.steps` budget (never without one)."""
+        if self.config.steps is None:
+            return jnp.zeros((), bool)
+        return state.env_steps >= self.config.steps
 
     def _failure(self, state: TrainState, metrics: dict) -> Array:
         """The `FAILURES` bits of the quantities of one iteration that are not all finite."""
