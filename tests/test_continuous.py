@@ -96,7 +96,7 @@ def test_masked_continuous_steps_change_nothing_bitwise():
 def test_continuous_defaults_normalise_the_model():
     config = from_preset("paper", env="inverted_pendulum", algo="ldn")
     assert config.model.normalize and config.model.predict_delta
-    assert config.agent.entropy_beta == 0.01 and config.agent.actor_lr == 1e-4
+    assert config.agent.entropy_beta == 0.0 and config.agent.actor_lr == 1e-3
     cartpole = from_preset("paper", env="cartpole-v1", algo="ldn")
     assert not cartpole.model.normalize and cartpole.agent.actor_lr == 1e-3
 
