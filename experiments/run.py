@@ -82,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
     except Interrupted as stopped:
         name = signal.Signals(stopped.signum).name
         print(
-            f"{name}: stopped after chunk {stopped.chunks_done}/{stopped.chunks}, checkpoint "
+            f"{name}: stopped after chunk {stopped.progress}, checkpoint "
             f"and metrics written. Resume with:\n  python experiments/run.py --resume {run}",
             file=sys.stderr,
         )

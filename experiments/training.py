@@ -28,8 +28,10 @@ from ldn_jax.train import Trainer
 class Interrupted(Exception):
     """Training stopped on request after a checkpoint; `--resume` continues it."""
 
-    def __init__(self, signum: int, chunks_done: int, chunks: int):
-        super().__init__(f"stopped after chunk {chunks_done}/{chunks}")
+    def __init__(self, signum: int, chunks_done: int, chunks: int | None):
+        """`chunks`: the run's chunks in all; None under a `steps` budget (not known)."""
+        self.progress = f"{chunks_done}/{chunks}" if chunks else f"{chunks_done}"
+        super().__init__(f"stopped after chunk {self.progress}")
         self.signum, self.chunks_done, self.chunks = signum, chunks_done, chunks
 
 
@@ -184,7 +186,8 @@ def _train_chunks(config, options, run, chunk_fn, states, k, history, session, p
                     name = f"chunk_{chunk + 1:05d}"
                     run.save_checkpoint(name, states, history, session, writer)
                 if stopping:
-                    raise Interrupted(stop.signum or signal.SIGINT, chunk + 1, chunks)
+                    known = chunks if config.steps is None else None
+                    raise Interrupted(stop.signum or signal.SIGINT, chunk + 1, known)
                 if last:
                     break
     finally:
