@@ -64,8 +64,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument(
         "--episodes",
         type=int,
-        help=f"real episodes per seed and K (default {d.episodes}; inverted_pendulum 800, other "
-        "MuJoCo tasks 16: CPU budgets, raise them on a GPU)",
+        help=f"real episodes per seed and K (default {d.episodes}; MuJoCo tasks 16 but "
+        "inverted_pendulum --steps 600000: CPU budgets, raise them on a GPU)",
     )
     p.add_argument(
         "--steps",
