@@ -12,7 +12,15 @@ from pathlib import Path
 
 import envs
 from experiments.loggers import LOGGERS
-from ldn_jax.config import ALGORITHMS, LD_ESTIMATORS, PRESETS, Config, from_preset, validate
+from ldn_jax.config import (
+    ALGORITHMS,
+    IMAGINE_MODES,
+    LD_ESTIMATORS,
+    PRESETS,
+    Config,
+    from_preset,
+    validate,
+)
 
 
 class UsageError(Exception):
@@ -50,6 +58,7 @@ CONFIG_FLAGS = {
     "backend": "backend",
     "ld": "model.ld",
     "ensemble_size": "model.ensemble",
+    "imagine": "model.imagine",
 }
 """CLI flag (its argparse name) -> the config field it sets (`model.X`: a `ModelConfig` field)."""
 
@@ -95,6 +104,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         type=int,
         metavar="E",
         help=f"members with --ld ensemble (default {d.model.ensemble})",
+    )
+    p.add_argument(
+        "--imagine",
+        choices=IMAGINE_MODES,
+        help="how imagined steps reach the learner: episodes (learnt from as they are played: "
+        "the paper), memory (PPO only: kept in the imaginary memory until a whole rollout's "
+        "worth exists) or batch (back-to-back imagined episodes, a fixed n_steps x workers a "
+        "iteration) (default: episodes; memory for the PPO family)",
     )
     p.add_argument("--out", help="run directory (default runs/ENV-ALGO-TIME)")
     p.add_argument("--resume", metavar="DIR", help="continue the run in DIR from its checkpoint")

@@ -2,7 +2,9 @@
 
 The same function plays real episodes (the world is the env) and imagined ones (the world is
 M1): a world is a pure `step(key, world_state, obs, action)`. Workers whose episode has
-ended stay in the batch with weight 0; nothing branches on them.
+ended stay in the batch with weight 0; nothing branches on them. With a `reset`, a worker
+whose episode ends starts the next at once instead (no weight-0 rows), and the batch plays
+whole segments until every worker has ended at least one episode.
 """
 
 from __future__ import annotations
@@ -32,9 +34,12 @@ class EpisodeCarry:
     """`[W, obs_size]`; frozen at the last observation once a worker's episode ends."""
     world: Any
     alive: Array
-    """`[W]` bool: the worker's episode is still running."""
+    """`[W]` bool: the worker's steps count (its first episode is still running, or it
+    auto-resets)."""
+    finished: Array
+    """`[W]` bool: the worker has ended at least one episode."""
     time: Array
-    """Steps taken, int32."""
+    """`[W]` int32: steps taken in the worker's current episode."""
 
 
 @struct.dataclass
@@ -56,6 +61,25 @@ class Episodes:
     def lengths(self) -> Array:
         return jnp.sum(self.steps.weight, axis=0).astype(jnp.int32)
 
+    @property
+    def ended(self) -> Array:
+        """Episodes that ended, per worker `[W]`: 1 each, unless the workers auto-reset."""
+        return jnp.sum(self.steps.done * self.steps.weight, axis=0)
+
+    def mean_episode(self) -> tuple[Array, Array]:
+        """Mean length and mean return of the episodes that ended, `([], [])`.
+
+        Without auto-reset these are `lengths.mean()` and `returns.mean()`; with it, the
+        steps of an episode cut off by the batch's end count in neither.
+        """
+        weight, done = self.steps.weight, self.steps.done * self.steps.weight
+        # A step belongs to an ended episode if its worker ends one at or after it.
+        in_ended = jnp.cumsum(done[::-1], axis=0)[::-1] > 0
+        episodes = jnp.maximum(self.ended.sum(), 1.0)
+        length = jnp.where(in_ended, weight, 0.0).sum() / episodes
+        total = jnp.where(in_ended, self.steps.reward * weight, 0.0).sum()
+        return length, total / episodes
+
 
 def play_episodes(
     key: Array,
@@ -65,10 +89,21 @@ def play_episodes(
     obs: Array,
     world: Any,
     max_steps: int,
+    reset: Callable[[Array], tuple[Array, Any]] | None = None,
+    learn: bool = True,
 ) -> tuple[LearnerState, Episodes]:
     """Play one episode on each of W workers, updating the learner every `n_steps` steps.
 
     An episode ends on `terminated`, on `truncated`, or after `max_steps` steps.
+
+    `reset(key) -> (obs [W, d], world_state)`: fresh starts for every worker. With it, a
+    worker whose episode ends starts another in the next step, so every row of the batch is
+    live; segments are played until every worker has ended an episode (at least one
+    segment). An episode still running at the batch's end is cut there: its last step
+    bootstraps, as at any segment's end.
+
+    `learn=False`: only play (the learner's parameters act throughout and are returned
+    unchanged; `losses` is empty), for a learner that learns from the whole batch later.
     """
     n_steps = learner.config.n_steps
     n_segments = math.ceil(max_steps / n_steps)
@@ -77,6 +112,8 @@ def play_episodes(
     def step(carry: EpisodeCarry, key: Array):
         k_act, k_world = jax.random.split(key)
         action = learner.act(carry.learner.params, k_act, carry.obs)
+        if reset is not None:
+            k_world, k_reset = jax.random.split(k_world)
         next_obs, world, reward, terminated, truncated, extras = world_step(
             k_world, carry.world, carry.obs, learner.env_action(action)
         )
@@ -91,19 +128,30 @@ def play_episodes(
             done=done,
             weight=carry.alive.astype(jnp.float32),
         )
-        alive = carry.alive & ~done
-        keep = lambda new, old: jnp.where(alive.reshape((-1,) + (1,) * (new.ndim - 1)), new, old)
+        finished = carry.finished | (carry.alive & done)
+        if reset is None:  # a finished worker keeps its last observation, masked
+            alive = carry_on = carry.alive & ~done
+            restart_obs, restart_world = carry.obs, carry.world
+        else:  # a finished worker starts its next episode
+            alive, carry_on = carry.alive, ~done
+            restart_obs, restart_world = reset(k_reset)
+        select = lambda new, old: jnp.where(
+            carry_on.reshape((-1,) + (1,) * (new.ndim - 1)), new, old
+        )
         carry = carry.replace(
-            obs=keep(next_obs, carry.obs),
-            world=jax.tree.map(keep, world, carry.world),
+            obs=select(next_obs, restart_obs),
+            world=jax.tree.map(select, world, restart_world),
             alive=alive,
-            time=carry.time + 1,
+            finished=finished,
+            time=jnp.where(carry_on, carry.time + 1, 0),
         )
         return carry, (transition, extras)
 
     def segment(carry: EpisodeCarry, key: Array):
         k_steps, k_update = jax.random.split(key)
         carry, (transitions, extras) = jax.lax.scan(step, carry, jax.random.split(k_steps, n_steps))
+        if not learn:
+            return carry, (transitions, extras, {})
         learner_state, losses = learner.update(carry.learner, transitions, k_update)
         return carry.replace(learner=learner_state), (transitions, extras, losses)
 
@@ -112,18 +160,20 @@ def play_episodes(
         obs=obs,
         world=world,
         alive=jnp.ones((workers,), bool),
-        time=jnp.zeros((), jnp.int32),
+        finished=jnp.zeros((workers,), bool),
+        time=jnp.zeros((workers,), jnp.int32),
     )
     keys = jax.random.split(key, n_segments)
-    # The loop over segments stops once every worker's episode has ended. The mask alone
-    # defines the result: a segment with no live step changes nothing (`keep_if_any`), so
-    # skipping it is pure savings. Under vmap the loop runs until the whole batch is done.
+    # The loop over segments stops once every worker has ended an episode. Without `reset`
+    # the mask alone defines the result: a segment with no live step changes nothing
+    # (`keep_if_any`), so skipping it is pure savings. Under vmap the loop runs until the
+    # whole batch is done.
     out_shape = jax.eval_shape(segment, carry, keys[0])[1]
     outputs = jax.tree.map(lambda x: jnp.zeros((n_segments, *x.shape), x.dtype), out_shape)
 
     def cond(loop):
         index, carry, _ = loop
-        return (index < n_segments) & carry.alive.any()
+        return (index < n_segments) & ~carry.finished.all()
 
     def body(loop):
         index, carry, outputs = loop

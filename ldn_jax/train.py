@@ -22,6 +22,7 @@ from ldn_jax.dynamics import Dynamics, ModelState
 from ldn_jax.imagination import model_world
 from ldn_jax.learners import LEARNERS
 from ldn_jax.learners.base import LearnerState
+from ldn_jax.learners.ppo import Memory
 from ldn_jax.learning_degree import ld_histogram
 from ldn_jax.rollout import Episodes, play_episodes
 from ldn_jax.sharding import compiler_options, shard_seeds
@@ -39,6 +40,9 @@ class TrainState:
     algorithms."""
     buffer: Buffer | None
     """Real transitions for fitting M1; None for model-free algorithms."""
+    memory: Memory | None
+    """The imaginary memory I of `ModelConfig.imagine = "memory"` (PPO rows waiting for a
+    full batch); None otherwise."""
     moving_return: Array
     """NaN until the first episode completes."""
     episodes: Array
@@ -62,6 +66,12 @@ FAILURES = (
     "episode returns",
 )
 """What the non-finite guard checks, in the order of the bits of `TrainState.failure`."""
+
+
+IMAGINED_STARTS = 16
+"""Under `ModelConfig.imagine = "batch"`, imagined episodes start from a pool of this many
+fresh env starts per worker, drawn once per iteration (a MuJoCo reset is a call to the
+engine, too dear for every imagined step); each episode picks one at random."""
 
 
 def failure_names(failure: int) -> list[str]:
@@ -97,17 +107,20 @@ class Trainer:
 
     def init_state(self, key: Array) -> TrainState:
         key, k_learner, k_model = jax.random.split(key, 3)
-        model = buffer = None
+        model = buffer = memory = None
         if self.dynamics is not None:
             model = self.dynamics.init(k_model)
             buffer = buffer_init(
                 self.config.model.buffer_capacity, self.obs_size, self.model_action_size
             )
+            if self.config.model.imagine == "memory":
+                memory = self.learner.memory_init(self.config.workers)
         zero = jnp.zeros((), jnp.int32)
         return TrainState(
             learner=self.learner.init(k_learner),
             model=model,
             buffer=buffer,
+            memory=memory,
             moving_return=jnp.full((), jnp.nan, jnp.float32),
             episodes=zero,
             env_steps=zero,
@@ -120,8 +133,9 @@ class Trainer:
 
     # -- stages ----------------------------------------------------------------------------
 
-    def _reset(self, key: Array) -> tuple[Array, object]:
-        keys = jax.random.split(key, self.config.workers)
+    def _reset(self, key: Array, count: int | None = None) -> tuple[Array, object]:
+        """`count` (default: one per worker) fresh starts of the real env."""
+        keys = jax.random.split(key, count or self.config.workers)
         return jax.vmap(self.env.reset, (0, None))(keys, self.env_params)
 
     def _env_world(self, key: Array, world, obs: Array, action: Array):
@@ -158,8 +172,16 @@ class Trainer:
     def imagine_stage(
         self, state: TrainState, key: Array, gain: Array
     ) -> tuple[TrainState, Episodes]:
+        """Imagined episodes in M1 from fresh initial states (`ModelConfig.imagine`)."""
         k_reset, k_play = jax.random.split(key)
-        obs, _ = self._reset(k_reset)
+        reset = None
+        if self.config.model.imagine == "batch":
+            starts, _ = self._reset(k_reset, IMAGINED_STARTS * self.config.workers)
+            obs = starts[: self.config.workers]
+            pick = lambda key: starts[jax.random.randint(key, obs.shape[:1], 0, len(starts))]
+            reset = lambda key: (pick(key), None)
+        else:
+            obs, _ = self._reset(k_reset)
         world = model_world(
             self.dynamics,
             state.model,
@@ -169,9 +191,17 @@ class Trainer:
             gain,
             self.config.algorithm.ld_stop,
         )
+        memory = self.config.model.imagine == "memory"
+        if memory:
+            k_play, k_learn = jax.random.split(k_play)
         learner, episodes = play_episodes(
-            k_play, state.learner, self.learner, world, obs, None, self.max_steps
+            k_play, state.learner, self.learner, world, obs, None, self.max_steps, reset, not memory
         )
+        if memory:
+            learner, state_memory, losses = self.learner.learn_from_memory(
+                learner, state.memory, episodes.steps, k_learn
+            )
+            state, episodes = state.replace(memory=state_memory), episodes.replace(losses=losses)
         return state.replace(learner=learner), episodes
 
     def _env_reward(self):
@@ -260,8 +290,8 @@ class Trainer:
             ld = imagined.extras["ld"]
             metrics["ld_mean"] = (ld * weight).sum() / weight.sum()
             metrics["ld_histogram"] = ld_histogram(ld, weight)  # Figure 5's data
-            metrics["imagined_length"] = imagined.lengths.mean()
-            metrics["imagined_return"] = imagined.returns.mean()
+            length, total = imagined.mean_episode()
+            metrics["imagined_length"], metrics["imagined_return"] = length, total
             metrics.update({f"imagined_{n}": v for n, v in imagined.losses.items()})
 
         state = state.replace(

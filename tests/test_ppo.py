@@ -1,5 +1,7 @@
 """PPO: the clipped surrogate, GAE, and masked steps that change nothing, to the bit."""
 
+from types import SimpleNamespace
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -7,7 +9,7 @@ import pytest
 
 from ldn_jax.config import AgentConfig, from_preset
 from ldn_jax.learners import A2C, PPO
-from ldn_jax.learners.base import Segment
+from ldn_jax.learners.base import Segment, canonical
 from ldn_jax.learners.ppo import clipped_surrogate, gae
 
 PPO_AGENT = from_preset("paper", algo="ppo").agent
@@ -128,6 +130,69 @@ def test_masked_steps_change_nothing_bitwise(learner_cls):
     # ...and the live steps did move the parameters.
     moved = jax.tree.map(lambda a, b: bool((a != b).any()), clean.params, state.params)
     assert all(jax.tree.leaves(moved))
+
+
+def test_ppo_masked_row_far_in_a_narrow_gaussians_tail_keeps_gradients_finite():
+    # The canonical (zeroed) masked rows have action 0; a policy whose mean is 0.9 with std
+    # 1e-4 gives them log pi = -4e7, so their log-ratio overflows exp after one Adam step.
+    spec = SimpleNamespace(discrete=False, size=1, low=(-1.0,), high=(1.0,))
+    learner = PPO(PPO_AGENT, obs_size=3, action_spec=spec)
+    state = learner.init(jax.random.key(0))
+    bias = state.params["actor"]["params"]
+    last = sorted(bias)[-1]
+    head = dict(bias[last], bias=jnp.array([1.5, -20.0]))
+    params = {**state.params, "actor": {"params": {**bias, last: head}}}
+    state = state.replace(params=params)
+    n, workers = 10, 4
+    weight = (jnp.arange(n)[:, None] < jnp.array([2, 5, 7, 10])[None]).astype(jnp.float32)
+    # One-step episodes; actions 2 std below the mean pay 1, above it -1: the update moves
+    # the mean down, towards the masked rows' action 0, and their log-ratio up.
+    mean = learner.greedy(params, jnp.zeros((1, 3)))[0]
+    side = jnp.where(jnp.arange(workers) % 2 == 0, -1.0, 1.0)[None].repeat(n, 0)
+    segment = Segment(
+        obs=jnp.zeros((n, workers, 3)),
+        action=(mean + 2e-4 * side)[..., None],
+        reward=-side,
+        next_obs=jnp.zeros((n, workers, 3)),
+        terminated=jnp.ones((n, workers), bool),
+        done=jnp.ones((n, workers), bool),
+        weight=weight,
+    )
+    log_pi, _ = learner.log_prob_entropy(params, jnp.zeros((1, 3)), jnp.zeros((1, 1)))
+    assert float(log_pi[0]) < -1e4  # the masked row is far in the tail
+    new, info = jax.jit(learner.update)(state, segment, jax.random.key(2))
+    assert all(np.isfinite(np.asarray(x)).all() for x in jax.tree.leaves(new.params))
+    assert all(np.isfinite(float(v)) for v in info.values())
+
+
+def test_imaginary_memory_learns_only_from_whole_rollouts_in_arrival_order():
+    agent = from_preset("paper", algo="ppo", agent={"n_steps": 5, "epochs": 2}).agent
+    learner = PPO(agent, obs_size=4, action_spec=2)
+    state = learner.init(jax.random.key(0))
+    memory = learner.memory_init(workers=3)  # 15 rows
+    learn = jax.jit(learner.learn_from_memory)
+    # 1 + 3 + 7 = 11 live rows: fewer than a batch, so nothing is learnt yet.
+    first = _segment(jax.random.key(1), 8, 3, dead_from=[1, 3, 7])
+    same, memory, info = learn(state, memory, first, jax.random.key(2))
+    _assert_trees_equal(same, state)
+    assert int(memory.count) == 11 and float(info["updates"]) == 0
+    assert float(info["actor_loss"]) == 0.0
+    # 11 + 8 = 19 live rows: one update on the first 15 (the 11 kept, then 4 new), 4 left.
+    second = _segment(jax.random.key(3), 8, 3, dead_from=[8, 0, 0])
+    new, memory, info = learn(state, memory, second, jax.random.key(4))
+    assert int(memory.count) == 4 and float(info["updates"]) == 1
+    rows = lambda segment: learner.batch(state.params, canonical(segment))
+    live = lambda batch: jax.tree.map(lambda x: x[np.asarray(batch.weight) > 0], batch)
+    everything = jax.tree.map(
+        lambda a, b: jnp.concatenate([a, b]), live(rows(first)), live(rows(second))
+    )
+    batch = jax.tree.map(lambda x: x[:15], everything)
+    expected, _ = learner.learn(state, batch, jax.random.split(jax.random.key(4))[1])
+    _assert_trees_equal(new, expected)
+    left = jax.tree.map(lambda x: x[15:], everything)
+    for name in ("obs", "action", "advantage", "log_prob"):
+        np.testing.assert_array_equal(getattr(memory.rows, name)[:4], getattr(left, name))
+    assert (np.asarray(memory.rows.weight)[4:] == 0).all()
 
 
 def test_ppo_fully_masked_segment_leaves_state_bitwise_unchanged():

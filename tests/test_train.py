@@ -85,6 +85,52 @@ def test_fully_masked_segment_leaves_learner_bitwise_unchanged():
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
 
 
+def test_reset_plays_back_to_back_episodes_until_every_worker_has_ended_one():
+    learner = A2C(AgentConfig(n_steps=4), obs_size=2, action_spec=2)
+    world = _scripted_world([3, 6, 1], [True, False, False])
+    reset = lambda key: (jnp.zeros((3, 2)), jnp.zeros(3, jnp.int32))
+    _, episodes = play_episodes(
+        jax.random.key(1),
+        learner.init(jax.random.key(0)),
+        learner,
+        world,
+        jnp.zeros((3, 2)),
+        jnp.zeros(3, jnp.int32),
+        max_steps=20,
+        reset=reset,
+    )
+    weight, done = np.asarray(episodes.steps.weight), np.asarray(episodes.steps.done)
+    # Two segments (worker 1's first episode ends at step 6), every row of them live.
+    assert (weight[:8] == 1).all() and (weight[8:] == 0).all()
+    np.testing.assert_array_equal(np.flatnonzero(done[:8, 0]), [2, 5])  # restarted at 3
+    np.testing.assert_array_equal(np.flatnonzero(done[:8, 1]), [5])
+    assert done[:8, 2].all()
+    assert np.asarray(episodes.steps.terminated)[:8, 0].sum() == 2
+    np.testing.assert_array_equal(np.asarray(episodes.ended), [2, 1, 8])
+    # Ended episodes only: 2 x 3 + 6 + 8 x 1 steps over 11 episodes (reward 1 a step).
+    length, total = episodes.mean_episode()
+    np.testing.assert_allclose([float(length), float(total)], [20 / 11, 20 / 11], rtol=1e-6)
+
+
+def test_mean_episode_without_reset_is_the_mean_length_and_return():
+    learner = A2C(AgentConfig(n_steps=4), obs_size=2, action_spec=2)
+    world = _scripted_world([3, 6, 1], [True, False, False])
+    _, episodes = play_episodes(
+        jax.random.key(1),
+        learner.init(jax.random.key(0)),
+        learner,
+        world,
+        jnp.zeros((3, 2)),
+        jnp.zeros(3, jnp.int32),
+        max_steps=20,
+    )
+    length, total = episodes.mean_episode()
+    np.testing.assert_array_equal(np.asarray(episodes.ended), 1)
+    np.testing.assert_allclose(float(length), float(episodes.lengths.mean()), rtol=1e-6)
+    np.testing.assert_allclose(float(total), float(episodes.returns.mean()), rtol=1e-6)
+    np.testing.assert_allclose(float(length), 10 / 3, rtol=1e-6)
+
+
 def _imagine(ld_stop, trained):
     dynamics = Dynamics(ModelConfig(), obs_size=4, action_size=2)
     model = dynamics.init(jax.random.key(0))
@@ -136,7 +182,7 @@ def _run_chunks(trainer, states, chunks=2):
     return states, history
 
 
-@pytest.mark.parametrize("algo", ["ldn", "ppo-model"])
+@pytest.mark.parametrize("algo", ["ldn", "ppo-ldn"])
 def test_m0_is_bitwise_frozen_and_m1_moves(algo):
     trainer = Trainer(_config(algo=algo))
     initial = jax.device_get(trainer.init_batch())
@@ -150,6 +196,11 @@ def test_m0_is_bitwise_frozen_and_m1_moves(algo):
     ]
     assert all(moved)
     assert int(final.imagined_steps.min()) > 0
+    config = trainer.config
+    if config.model.imagine == "memory":  # the PPO family: every imagined step went to I
+        assert config.algo.startswith("ppo")
+        rows = config.agent.n_steps * config.workers
+        np.testing.assert_array_equal(final.memory.count, final.imagined_steps % rows)
 
 
 @pytest.mark.parametrize("algo", ["a2c", "ldn", "ppo-ldn"])

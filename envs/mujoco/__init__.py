@@ -163,7 +163,14 @@ class MujocoEnv:
 
 
 def control(task: Task, action: Array) -> Array:
-    """Our action in [-1, 1] -> the actuators' control (gymnasium's action)."""
+    """Our action in [-1, 1] -> the actuators' control (gymnasium's action).
+
+    A non-finite action (a diverged policy) is applied as zero control: MuJoCo would print a
+    warning for every such step and reset its state, and MJX would carry the NaN on. The
+    return of such a step is still non-finite where the reward reads the action, and the
+    trainer's guard reports the divergence either way.
+    """
+    action = jnp.where(jnp.isfinite(action), action, 0.0)
     low, high = task.ctrl_range
     if (low, high) == (-1.0, 1.0):
         return action

@@ -78,6 +78,16 @@ class Batch:
     weight: Array
 
 
+@struct.dataclass
+class Memory:
+    """The imaginary memory I (Algorithm 1, line 4): PPO rows waiting until a rollout's
+    worth exists (`ModelConfig.imagine = "memory"`)."""
+
+    rows: Batch
+    """`[n_steps * workers, ...]`; the first `count` are live, the rest weight 0."""
+    count: Array
+
+
 class PPO(ActorCritic):
     """Clipped-objective PPO (PPO2) on each segment; Adam with global-norm clipping."""
 
@@ -131,7 +141,11 @@ class PPO(ActorCritic):
         advantage = (batch.advantage - centre) / (scale + 1e-8)
 
         log_prob, entropy = self.log_prob_entropy(params, batch.obs, batch.action)
-        log_ratio = log_prob - batch.log_prob
+        # A masked row's log-ratio is set to 0, not just weighted away: its canonical zero
+        # action can lie far in a narrow Gaussian's tail (log pi_old = -1,052 was seen on
+        # inverted_pendulum), where exp overflows after one step, and the backward pass's
+        # 0 x inf would turn every gradient into NaN.
+        log_ratio = jnp.where(w > 0, log_prob - batch.log_prob, 0.0)
         ratio = jnp.exp(log_ratio)
         actor_loss = -mean(clipped_surrogate(ratio, advantage, cfg.clip_eps))
 
@@ -164,14 +178,17 @@ class PPO(ActorCritic):
     ) -> tuple[LearnerState, dict]:
         """`epochs` passes of `minibatches` shuffled minibatches over one segment's rows.
 
-        The row count is padded with weight-0 rows to a multiple of `minibatches`, so any
-        W x n works. Returns the losses averaged over minibatches that had live rows. `key`
-        shuffles the rows, so PPO needs one.
+        `key` shuffles the rows, so PPO needs one. Returns the losses averaged over
+        minibatches that had live rows.
         """
         if key is None:
             raise ValueError("PPO's update shuffles minibatches: pass a PRNG key")
+        return self.learn(state, self.batch(state.params, canonical(segment)), key)
+
+    def learn(self, state: LearnerState, batch: Batch, key: Array) -> tuple[LearnerState, dict]:
+        """PPO's epochs over fixed rows. The row count is padded with weight-0 rows to a
+        multiple of `minibatches`, so any count works."""
         cfg = self.config
-        batch = self.batch(state.params, canonical(segment))
         rows = batch.weight.shape[0]
         size = math.ceil(rows / cfg.minibatches)
         pad = size * cfg.minibatches - rows
@@ -188,3 +205,69 @@ class PPO(ActorCritic):
         live = live.astype(jnp.float32)
         info = jax.tree.map(lambda x: (x * live).sum() / jnp.maximum(live.sum(), 1.0), info)
         return state, info
+
+    # -- the imaginary memory -----------------------------------------------------------------
+
+    def memory_init(self, workers: int) -> Memory:
+        """An empty memory holding one rollout's worth of rows: `n_steps x workers`."""
+        rows = self.config.n_steps * workers
+        shapes = {
+            "obs": (self.obs_size,),
+            "action": () if self.policy.discrete else (self.policy.size,),
+        }
+        dtype = {"action": jnp.int32 if self.policy.discrete else jnp.float32}
+        fields = ("obs", "action", "log_prob", "value", "advantage", "target", "weight")
+        batch = Batch(
+            **{
+                f: jnp.zeros((rows, *shapes.get(f, ())), dtype.get(f, jnp.float32))
+                for f in fields
+            }
+        )
+        return Memory(rows=batch, count=jnp.zeros((), jnp.int32))
+
+    def learn_from_memory(
+        self, state: LearnerState, memory: Memory, segment: Segment, key: Array
+    ) -> tuple[LearnerState, Memory, dict]:
+        """Add a batch of played steps (`[T, W]`, masked, collected with `state`'s
+        parameters) to the memory, and learn from each full rollout's worth it then holds.
+
+        The steps become PPO rows at once (GAE, log pi_old and V_old of the parameters that
+        played them), so each row keeps the quantities of the policy that collected it, as
+        in any PPO rollout; full batches are learnt in the order their rows came. What is
+        left (fewer rows than a batch) waits for the next call. Returns the losses averaged
+        over this call's updates (zeros and `updates` 0 when there was none).
+        """
+        capacity = memory.rows.weight.shape[0]
+        rows = self.batch(state.params, canonical(segment))
+        # Live rows first, in their order; then the memory's rows followed by the new ones
+        # (the pool's rows past `total` all have weight 0).
+        live_first = jnp.argsort(rows.weight == 0, stable=True)
+        rows = jax.tree.map(lambda x: x[live_first], rows)
+        total = memory.count + (rows.weight > 0).sum().astype(jnp.int32)
+        spare = jax.tree.map(lambda x: jnp.zeros((capacity, *x.shape[1:]), x.dtype), rows)
+        pool = jax.tree.map(lambda *x: jnp.concatenate(x), memory.rows, rows, spare)
+        pool = jax.tree.map(
+            lambda p, x: jax.lax.dynamic_update_slice_in_dim(p, x, memory.count, 0), pool, rows
+        )
+        take = lambda start: jax.tree.map(
+            lambda x: jax.lax.dynamic_slice_in_dim(x, start, capacity, 0), pool
+        )
+        _, zero_info = jax.eval_shape(self.learn, state, take(0), key)
+        zero_info = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), zero_info)
+
+        def full(loop):
+            return total - loop[0] >= capacity
+
+        def learn_next(loop):
+            start, state, info_sum, updates, key = loop
+            key, k_learn = jax.random.split(key)
+            state, info = self.learn(state, take(start), k_learn)
+            info_sum = jax.tree.map(jnp.add, info_sum, info)
+            return start + capacity, state, info_sum, updates + 1, key
+
+        start, state, info_sum, updates, _ = jax.lax.while_loop(
+            full, learn_next, (jnp.zeros((), jnp.int32), state, zero_info, jnp.int32(0), key)
+        )
+        info = jax.tree.map(lambda x: x / jnp.maximum(updates, 1), info_sum)
+        info["updates"] = updates.astype(jnp.float32)
+        return state, Memory(rows=take(start), count=total - start), info
