@@ -242,6 +242,8 @@ BAD_INPUT = [
     (["--steps", "1e6"], "argument --steps: invalid int value: '1e6'"),
     (["--steps", "1000", "--episodes", "10"], "give --steps or --episodes, not both"),
     (["--workers", "0"], "workers must be >= 1, got 0"),
+    (["--algo", "ldn", "--imagine", "memory"], "imagine 'memory' needs the PPO learner"),
+    (["--imagine", "all"], "argument --imagine: invalid choice: 'all'"),
     (["--workers", "many"], "argument --workers: invalid int value: 'many'"),
     (["--preset", "fastest"], "unknown preset 'fastest'"),
     (["--threshold", "nan"], "threshold must be a finite number, got nan"),

@@ -1,12 +1,11 @@
 """`slow`: the algorithms learn CartPole-v1 and inverted_pendulum within stated budgets."""
 
-import json
-
 import numpy as np
 import pytest
 
 from experiments.training import train
 from ldn_jax.config import from_preset
+from ldn_jax.run_dir import RunDir
 
 # Measured on 2 CPU cores (2026-11-22), seeds 0-3, paper preset: a2c reached 150 in
 # 688-1112 episodes and ldn in 839-1003; ppo in 174-253 and ppo-ldn in 240-573. The budgets
@@ -25,21 +24,46 @@ def test_reaches_150_on_cartpole_v1(algo, tmp_path):
     assert len(reached) >= 3, summary["runs"]
 
 
-# Measured on 2 CPU cores (2026-11-22), seeds 0-3, 800 episodes (about 6,000 env steps): the
-# moving return rose from 2.2-3.4 to 5.6-10.0 and the greedy policy's eval return was 41-63
-# (a random policy scores about 5).
+# inverted_pendulum, native engine, 2 CPU cores (2026-12-01), 5 seeds, --steps 600000 (the
+# default): ppo's moving return first reached 900 after 325k-430k env steps (seed 0: 373k),
+# a2c's after A2C_STEPS. One seed here, with room above the slowest of the five.
+IP_BUDGET = {"a2c": 600_000, "ppo": 500_000}
+
+
+def _best_moving_return(run_dir) -> np.ndarray:
+    """The highest moving return each run reached, `[K * S]`."""
+    moving = RunDir(run_dir).history()["moving_after"]
+    return np.nanmax(moving.reshape(moving.shape[0] * moving.shape[1], -1), axis=-1)
+
+
 @pytest.mark.slow
 @pytest.mark.mujoco
-def test_ldn_improves_on_inverted_pendulum(tmp_path):
+@pytest.mark.parametrize("algo", list(IP_BUDGET))
+def test_reaches_900_on_inverted_pendulum(algo, tmp_path):
     config = from_preset(
-        "paper", env="inverted_pendulum", algo="ldn", seeds=4, k=(1.0,), episodes=800
+        "paper",
+        env="inverted_pendulum",
+        algo=algo,
+        seeds=1,
+        steps=IP_BUDGET[algo],
+        backend="native",
     )
-    summary = train(config, tmp_path, checkpoint_every=0, quiet=True)
-    lines = [json.loads(line) for line in (tmp_path / "metrics.jsonl").read_text().splitlines()]
-    gains = []
-    for seed in range(4):
-        moving = [line["moving_return"] for line in lines if line["seed"] == seed]
-        gains.append(moving[-1] - moving[0])
-    assert sum(gain >= 2.0 for gain in gains) >= 3, gains
-    evals = [run["eval_return"] for run in summary["runs"]]
-    assert np.mean(evals) >= 20.0, evals
+    train(config, tmp_path, checkpoint_every=0, quiet=True)
+    assert _best_moving_return(tmp_path)[0] >= 900
+
+
+# The same setting for ldn and a2c-model: LDN_VS_MODEL.
+LDN_MARGIN = 100.0
+
+
+@pytest.mark.slow
+@pytest.mark.mujoco
+def test_ldn_is_not_worse_than_a2c_model_on_inverted_pendulum(tmp_path):
+    best = {}
+    for algo in ("ldn", "a2c-model"):
+        config = from_preset(
+            "paper", env="inverted_pendulum", algo=algo, seeds=2, k=(1.0,), steps=300_000
+        )
+        train(config, tmp_path / algo, checkpoint_every=0, quiet=True)
+        best[algo] = _best_moving_return(tmp_path / algo).mean()
+    assert best["ldn"] >= best["a2c-model"] - LDN_MARGIN, best
