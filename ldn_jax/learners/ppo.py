@@ -218,10 +218,7 @@ class PPO(ActorCritic):
         dtype = {"action": jnp.int32 if self.policy.discrete else jnp.float32}
         fields = ("obs", "action", "log_prob", "value", "advantage", "target", "weight")
         batch = Batch(
-            **{
-                f: jnp.zeros((rows, *shapes.get(f, ())), dtype.get(f, jnp.float32))
-                for f in fields
-            }
+            **{f: jnp.zeros((rows, *shapes.get(f, ())), dtype.get(f, jnp.float32)) for f in fields}
         )
         return Memory(rows=batch, count=jnp.zeros((), jnp.int32))
 
