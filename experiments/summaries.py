@@ -177,7 +177,8 @@ def closing_lines(config: Config, summary: dict, run: RunDir) -> None:
         )
     print(
         f"{config.env} {config.algo}: {outcome}; compile {summary['compile_seconds']:.1f}s, "
-        f"train {summary['train_seconds']:.1f}s, eval {summary['eval_seconds']:.1f}s, "
+        f"train {summary['train_seconds']:.1f}s, eval {summary['eval_seconds']:.1f}s "
+        f"({summary['eval_share']:.0%} of training), "
         f"{summary['env_steps_per_second']:,.0f} env steps/s"
     )
     diverged = [r for r in summary["runs"] if r["diverged"]]

@@ -145,6 +145,7 @@ def train(config: Config, out: Path, options: TrainOptions | None = None, **fiel
     history = {name: np.concatenate(parts, axis=2) for name, parts in history.items()}
     summary = summaries.summarize(config, history, eval_returns, states, session)
     summary["eval_seconds"] = round(eval_seconds, 3)  # its compile included
+    summary["eval_share"] = round(eval_seconds / max(summary["train_seconds"], 1e-9), 3)
     summary["devices"] = 1 if mesh is None else mesh.size
     summary["bitwise"] = bitwise
     if writer:

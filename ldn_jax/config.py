@@ -310,8 +310,9 @@ CONTINUOUS_MODEL = {"normalize": True, "predict_delta": True, "env_reward": True
 
 DEFAULT_STEPS = {"inverted_pendulum": 600_000}
 """Default budgets in env steps (`Config.steps`), where no `episodes` or `steps` is given.
-inverted_pendulum, 5 seeds, native engine, 2 cores: a2c and ldn went above a moving return
-of 900 on every seed within 600k steps (a2c 147 s and ldn 193 s of training)."""
+inverted_pendulum, 5 seeds, native engine, 2 cores: a2c, ldn, ppo, ppo-model and ppo-ldn went
+above a moving return of 900 on every seed within 600k steps, in 147-300 s of training
+(a2c-model did not: README, MuJoCo)."""
 
 DEFAULT_EPISODES = {}
 """Budgets a CPU finishes in minutes, for envs whose paper-scale budget takes hours on CPU:

@@ -52,7 +52,7 @@ def test_summary_counts_are_the_metrics_sums(budget_run):
     assert summary["budget"] == {"steps": STEPS}
     assert summary["env_steps"] == sum(line["env_steps"] for line in final.values())
     assert summary["real_episodes"] == sum(line["episodes"] for line in final.values())
-    assert summary["eval_seconds"] >= 0
+    assert summary["eval_seconds"] >= 0 and summary["eval_share"] >= 0
 
 
 def test_an_episodes_run_records_its_budget_and_both_counts(tmp_path):

@@ -25,8 +25,8 @@ def test_reaches_150_on_cartpole_v1(algo, tmp_path):
 
 
 # inverted_pendulum, native engine, 2 CPU cores (2026-12-01), 5 seeds, --steps 600000 (the
-# default): ppo's moving return first reached 900 after 325k-430k env steps (seed 0: 373k),
-# a2c's after A2C_STEPS. One seed here, with room above the slowest of the five.
+# default): ppo's moving return first reached 900 after 325k-430k env steps (seed 0: 373k);
+# a2c's went above 900 on every seed within the 600k (highest 900-948). One seed here.
 IP_BUDGET = {"a2c": 600_000, "ppo": 500_000}
 
 
@@ -52,7 +52,9 @@ def test_reaches_900_on_inverted_pendulum(algo, tmp_path):
     assert _best_moving_return(tmp_path)[0] >= 900
 
 
-# The same setting for ldn and a2c-model: LDN_VS_MODEL.
+# Measured (5 seeds, native, 2 cores, 2026-12-01): the highest moving return within 300k
+# env steps was 827-916 for ldn (seeds 0-1: 827, 860) and 567-853 for a2c-model (853, 774).
+# The margin covers seed noise, not a known deficit.
 LDN_MARGIN = 100.0
 
 
