@@ -195,7 +195,15 @@ class Trainer:
         if memory:
             k_play, k_learn = jax.random.split(k_play)
         learner, episodes = play_episodes(
-            k_play, state.learner, self.learner, world, obs, None, self.max_steps, reset, not memory
+            k_play,
+            state.learner,
+            self.learner,
+            world,
+            obs,
+            None,
+            self.max_steps,
+            reset=reset,
+            learn=not memory,
         )
         if memory:
             learner, state_memory, losses = self.learner.learn_from_memory(

@@ -203,6 +203,17 @@ def test_m0_is_bitwise_frozen_and_m1_moves(algo):
         np.testing.assert_array_equal(final.memory.count, final.imagined_steps % rows)
 
 
+def test_imagined_batch_fills_whole_segments_every_iteration():
+    trainer = Trainer(_config(model={"imagine": "batch"}))
+    _, history = _run_chunks(trainer, trainer.init_batch(), chunks=1)
+    config = trainer.config
+    rows = config.agent.n_steps * config.workers
+    imagined = np.diff(history[0]["imagined_steps"], axis=-1, prepend=0)  # [K, S, N]
+    assert (imagined % rows == 0).all() and (imagined >= rows).all()
+    # An untrained M1 stops almost every imagined episode at once: many episodes a worker.
+    assert (history[0]["imagined_length"] < 3).all()
+
+
 @pytest.mark.parametrize("algo", ["a2c", "ldn", "ppo-ldn"])
 def test_same_seed_gives_bitwise_identical_metrics(algo):
     trainer = Trainer(_config(algo=algo, k=(1.0, 2.0) if algo.endswith("ldn") else (1.0,)))
