@@ -86,7 +86,10 @@ class AgentConfig:
     gae_lambda: float = 0.95
     """PPO: lambda of generalised advantage estimation."""
     clip_eps: float = 0.2
-    """PPO: clip range of the probability ratio (and of the value change, as in PPO2)."""
+    """PPO: clip range of the probability ratio."""
+    value_clip: float | None = 0.2
+    """PPO: clip range of the value change from V_old, in the critic's units (PPO2's value
+    clip); None: an unclipped value loss."""
     epochs: int = 4
     """PPO: passes over each segment's transitions."""
     minibatches: int = 4
@@ -380,6 +383,10 @@ def validate(config: Config) -> Config:
         (config.agent.activation in ACTIVATIONS, f"activation must be one of {ACTIVATIONS}"),
         (0 <= config.agent.gae_lambda <= 1, "gae_lambda must be in [0, 1]"),
         (config.agent.clip_eps > 0, "clip_eps must be > 0"),
+        (
+            config.agent.value_clip is None or config.agent.value_clip > 0,
+            "value_clip must be > 0 (or None: no clip)",
+        ),
         (config.agent.epochs >= 1, "epochs must be >= 1"),
         (config.agent.minibatches >= 1, "minibatches must be >= 1"),
         (config.agent.max_grad_norm > 0, "max_grad_norm must be > 0"),

@@ -25,6 +25,23 @@ def _scripted_world(end_at, terminal):
     return step
 
 
+def _play_scripted(end_at, terminal, n_steps, max_steps, reset=False):
+    """The episodes of `_scripted_world` from zero observations, A2C updating every n_steps;
+    `reset`: workers restart from the same zero start."""
+    learner = A2C(AgentConfig(n_steps=n_steps), obs_size=2, action_spec=2)
+    start = (jnp.zeros((len(end_at), 2)), jnp.zeros(len(end_at), jnp.int32))
+    _, episodes = play_episodes(
+        jax.random.key(1),
+        learner.init(jax.random.key(0)),
+        learner,
+        _scripted_world(end_at, terminal),
+        *start,
+        max_steps=max_steps,
+        reset=(lambda key: start) if reset else None,
+    )
+    return episodes
+
+
 def test_masks_end_episodes_and_stop_learning():
     learner = A2C(AgentConfig(n_steps=4), obs_size=2, action_spec=2)
     state = learner.init(jax.random.key(0))
@@ -46,17 +63,7 @@ def test_masks_end_episodes_and_stop_learning():
 
 
 def test_max_steps_truncates():
-    learner = A2C(AgentConfig(n_steps=3), obs_size=2, action_spec=2)
-    world = _scripted_world([100, 100], [True, True])
-    _, episodes = play_episodes(
-        jax.random.key(1),
-        learner.init(jax.random.key(0)),
-        learner,
-        world,
-        jnp.zeros((2, 2)),
-        jnp.zeros(2, jnp.int32),
-        max_steps=7,
-    )
+    episodes = _play_scripted([100, 100], [True, True], n_steps=3, max_steps=7)
     np.testing.assert_array_equal(np.asarray(episodes.lengths), [7, 7])
     done = np.asarray(episodes.steps.done)
     assert done[6].all() and not np.asarray(episodes.steps.terminated).any()
@@ -86,19 +93,7 @@ def test_fully_masked_segment_leaves_learner_bitwise_unchanged():
 
 
 def test_reset_plays_back_to_back_episodes_until_every_worker_has_ended_one():
-    learner = A2C(AgentConfig(n_steps=4), obs_size=2, action_spec=2)
-    world = _scripted_world([3, 6, 1], [True, False, False])
-    reset = lambda key: (jnp.zeros((3, 2)), jnp.zeros(3, jnp.int32))
-    _, episodes = play_episodes(
-        jax.random.key(1),
-        learner.init(jax.random.key(0)),
-        learner,
-        world,
-        jnp.zeros((3, 2)),
-        jnp.zeros(3, jnp.int32),
-        max_steps=20,
-        reset=reset,
-    )
+    episodes = _play_scripted([3, 6, 1], [True, False, False], 4, 20, reset=True)
     weight, done = np.asarray(episodes.steps.weight), np.asarray(episodes.steps.done)
     # Two segments (worker 1's first episode ends at step 6), every row of them live.
     assert (weight[:8] == 1).all() and (weight[8:] == 0).all()
@@ -113,17 +108,7 @@ def test_reset_plays_back_to_back_episodes_until_every_worker_has_ended_one():
 
 
 def test_mean_episode_without_reset_is_the_mean_length_and_return():
-    learner = A2C(AgentConfig(n_steps=4), obs_size=2, action_spec=2)
-    world = _scripted_world([3, 6, 1], [True, False, False])
-    _, episodes = play_episodes(
-        jax.random.key(1),
-        learner.init(jax.random.key(0)),
-        learner,
-        world,
-        jnp.zeros((3, 2)),
-        jnp.zeros(3, jnp.int32),
-        max_steps=20,
-    )
+    episodes = _play_scripted([3, 6, 1], [True, False, False], 4, 20)
     length, total = episodes.mean_episode()
     np.testing.assert_array_equal(np.asarray(episodes.ended), 1)
     np.testing.assert_allclose(float(length), float(episodes.lengths.mean()), rtol=1e-6)
@@ -203,15 +188,17 @@ def test_m0_is_bitwise_frozen_and_m1_moves(algo):
         np.testing.assert_array_equal(final.memory.count, final.imagined_steps % rows)
 
 
-def test_imagined_batch_fills_whole_segments_every_iteration():
+def test_imagined_batch_fills_a_whole_segment_with_back_to_back_episodes():
     trainer = Trainer(_config(model={"imagine": "batch"}))
-    _, history = _run_chunks(trainer, trainer.init_batch(), chunks=1)
-    config = trainer.config
-    rows = config.agent.n_steps * config.workers
-    imagined = np.diff(history[0]["imagined_steps"], axis=-1, prepend=0)  # [K, S, N]
-    assert (imagined % rows == 0).all() and (imagined >= rows).all()
-    # An untrained M1 stops almost every imagined episode at once: many episodes a worker.
-    assert (history[0]["imagined_length"] < 3).all()
+    state = trainer.init_state(jax.random.key(0))  # M1 == M0: LD 0, every episode 1 step
+    _, episodes = jax.jit(trainer.imagine_stage)(state, jax.random.key(1), jnp.float32(1.0))
+    n_steps, workers = trainer.config.agent.n_steps, trainer.config.workers
+    weight = np.asarray(episodes.steps.weight)
+    assert (weight[:n_steps] == 1).all() and (weight[n_steps:] == 0).all()
+    np.testing.assert_array_equal(np.asarray(episodes.ended), n_steps)
+    assert np.asarray(episodes.steps.done)[:n_steps].all()
+    starts = np.asarray(episodes.steps.obs)[:n_steps].reshape(-1, 4)
+    assert len(np.unique(starts, axis=0)) > workers  # restarts drawn from the pool
 
 
 @pytest.mark.parametrize("algo", ["a2c", "ldn", "ppo-ldn"])

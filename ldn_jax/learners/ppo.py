@@ -150,10 +150,11 @@ class PPO(ActorCritic):
         actor_loss = -mean(clipped_surrogate(ratio, advantage, cfg.clip_eps))
 
         value = self.value(params, batch.obs)
-        clipped_value = batch.value + jnp.clip(value - batch.value, -cfg.clip_eps, cfg.clip_eps)
-        critic_loss = 0.5 * mean(
-            jnp.maximum(jnp.square(value - batch.target), jnp.square(clipped_value - batch.target))
-        )
+        value_error = jnp.square(value - batch.target)
+        if cfg.value_clip is not None:
+            change = jnp.clip(value - batch.value, -cfg.value_clip, cfg.value_clip)
+            value_error = jnp.maximum(value_error, jnp.square(batch.value + change - batch.target))
+        critic_loss = 0.5 * mean(value_error)
         entropy_mean = mean(entropy)
         total = actor_loss + cfg.value_coef * critic_loss - cfg.entropy_beta * entropy_mean
         return total, {
