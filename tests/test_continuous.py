@@ -99,6 +99,10 @@ def test_continuous_defaults_normalise_the_model():
     assert config.agent.entropy_beta == 0.0 and config.agent.actor_lr == 1e-3
     cartpole = from_preset("paper", env="cartpole-v1", algo="ldn")
     assert not cartpole.model.normalize and cartpole.agent.actor_lr == 1e-3
+    ppo = from_preset("paper", env="inverted_pendulum", algo="ppo-ldn")
+    assert ppo.agent.value_clip is None and (ppo.agent.epochs, ppo.agent.minibatches) == (10, 10)
+    assert ppo.model.imagine == "memory"
+    assert from_preset("paper", env="cartpole-v1", algo="ppo").agent.value_clip == 0.2
 
 
 @pytest.mark.mujoco

@@ -25,7 +25,7 @@ def test_reaches_150_on_cartpole_v1(algo, tmp_path):
 
 
 # inverted_pendulum, native engine, 2 CPU cores (2026-12-01), 5 seeds, --steps 600000 (the
-# default): ppo's moving return first reached 900 after 325k-430k env steps (seed 0: 373k);
+# default): ppo's moving return first reached 900 after 236k-259k env steps (seed 0: 252k);
 # a2c's went above 900 on every seed within the 600k (highest 900-948). One seed here.
 IP_BUDGET = {"a2c": 600_000, "ppo": 500_000}
 

@@ -10,7 +10,7 @@ import pytest
 from ldn_jax.config import AgentConfig, from_preset
 from ldn_jax.learners import A2C, PPO
 from ldn_jax.learners.base import Segment, canonical
-from ldn_jax.learners.ppo import clipped_surrogate, gae
+from ldn_jax.learners.ppo import Batch, clipped_surrogate, gae
 
 PPO_AGENT = from_preset("paper", algo="ppo").agent
 
@@ -193,6 +193,26 @@ def test_imaginary_memory_learns_only_from_whole_rollouts_in_arrival_order():
     for name in ("obs", "action", "advantage", "log_prob"):
         np.testing.assert_array_equal(getattr(memory.rows, name)[:4], getattr(left, name))
     assert (np.asarray(memory.rows.weight)[4:] == 0).all()
+
+
+@pytest.mark.parametrize("value_clip", [None, 0.2])
+def test_value_loss_is_clipped_around_v_old_only_with_a_value_clip(value_clip):
+    agent = from_preset("paper", algo="ppo", agent={"value_clip": value_clip}).agent
+    learner = PPO(agent, obs_size=2, action_spec=2)
+    params = learner.init(jax.random.key(0)).params
+    obs = jax.random.normal(jax.random.key(1), (6, 2))
+    value = learner.value(params, obs)
+    action = jnp.zeros(6, jnp.int32)
+    log_prob, _ = learner.log_prob_entropy(params, obs, action)
+    target = value + 10.0  # far above V: the clip, if any, keeps V_old's own error
+    batch = Batch(obs, action, log_prob, value, jnp.ones(6), target, jnp.ones(6))
+    _, info = learner.loss(params, batch)
+    # V == V_old here, so the clipped and unclipped errors agree: 0.5 x 10^2.
+    np.testing.assert_allclose(float(info["critic_loss"]), 50.0, rtol=1e-5)
+    moved = batch.replace(value=value - 1.0)  # V_old 1 below V: V may move 0.2 from it
+    _, info = learner.loss(params, moved)
+    expected = 50.0 if value_clip is None else 0.5 * (10.0 + 1.0 - 0.2) ** 2
+    np.testing.assert_allclose(float(info["critic_loss"]), expected, rtol=1e-5)
 
 
 def test_ppo_fully_masked_segment_leaves_state_bitwise_unchanged():
