@@ -147,6 +147,13 @@ class ModelConfig:
     """Minibatch size of each model step, drawn uniformly from the real buffer."""
     buffer_capacity: int = 50_000
     """Real transitions kept per seed and K (a ring buffer: the oldest are overwritten)."""
+    support: float | None = None
+    """An imagined episode stops (a truncation: the critic bootstraps) at a predicted
+    observation outside the box of real observations in the buffer, widened on each side
+    by this fraction of the box's width; None: never. M1 is fitted on real transitions
+    only, so outside that box its prediction is extrapolation (the paper's linear nets
+    drive inverted_pendulum's cart through its rails: 13-57% of imagined steps had
+    |x| > 1, the rail, up to x = 9)."""
 
 
 @dataclass(frozen=True)

@@ -44,6 +44,10 @@ class ModelState:
     """Ensemble only (None otherwise, so the m0 state and its checkpoints keep their layout):
     the members' mean eq. 2 loss of the last fit, in the model's normalised units; 1 until the
     first fit. Disagreement is measured relative to it (`relative_disagreement`)."""
+    bounds: tuple[Array, Array] | None = None
+    """With `ModelConfig.support` set (None otherwise, so other states keep their layout):
+    the lowest and highest real observation per dimension in the buffer, `([D], [D])`,
+    refreshed before each fit and widened by `support`; unbounded until the first fit."""
 
 
 class Dynamics:
@@ -86,6 +90,7 @@ class Dynamics:
             opt_state=opt_state,
             stats=self.init_stats(),
             error_scale=jnp.ones((), jnp.float32) if self.ensemble else None,
+            bounds=self._unbounded() if self.config.support is not None else None,
         )
 
     def predict_normalized(
@@ -138,6 +143,32 @@ class Dynamics:
         )
         return jnp.mean(jnp.square(pred - target))
 
+    def _unbounded(self) -> tuple[Array, Array]:
+        return jnp.full(self.obs_size, -jnp.inf), jnp.full(self.obs_size, jnp.inf)
+
+    def buffer_bounds(self, buffer: Buffer) -> tuple[Array, Array]:
+        """The box of the buffer's valid observations (before and after each step), widened
+        on each side by `config.support` times its width; unbounded while the buffer is
+        empty."""
+        valid = jnp.tile(jnp.arange(buffer.capacity) < buffer.size, 2)[:, None]
+        obs = jnp.concatenate([buffer.data.obs, buffer.data.next_obs])
+        low = jnp.min(jnp.where(valid, obs, jnp.inf), axis=0)
+        high = jnp.max(jnp.where(valid, obs, -jnp.inf), axis=0)
+        margin = self.config.support * (high - low)
+        unbounded_low, unbounded_high = self._unbounded()
+        empty = buffer.size == 0
+        return (
+            jnp.where(empty, unbounded_low, low - margin),
+            jnp.where(empty, unbounded_high, high + margin),
+        )
+
+    def within_bounds(self, state: ModelState, obs: Array) -> Array:
+        """`[..., D] -> [...]`: the observation lies in `state.bounds` (always, without)."""
+        if state.bounds is None:
+            return jnp.ones(obs.shape[:-1], bool)
+        low, high = state.bounds
+        return jnp.all((obs >= low) & (obs <= high), axis=-1)
+
     def buffer_stats(self, buffer: Buffer) -> Normalizer:
         """Mean and std of the buffer's valid observations and rewards (std floored)."""
         valid = (jnp.arange(buffer.capacity) < buffer.size).astype(jnp.float32)
@@ -162,6 +193,8 @@ class Dynamics:
         """
         if self.config.normalize:
             state = state.replace(stats=self.buffer_stats(buffer))
+        if self.config.support is not None:
+            state = state.replace(bounds=self.buffer_bounds(buffer))
         if not self.ensemble:
             params, opt_state, loss = self._fit_one(
                 state.params, state.opt_state, state.stats, buffer, key

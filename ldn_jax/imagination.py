@@ -50,6 +50,8 @@ def model_world(
     model takes it (one-hot, or the clipped vector). The deviation of eq. 3 is taken in the
     model's normalised output space (the raw one when normalisation is off), so no
     observation dimension dominates it by its units; so is an ensemble's disagreement.
+    A prediction outside the real data's box (`ModelConfig.support`) stops the episode as
+    the LD draw does; extras then carry `outside`, the steps it stopped that way.
     """
     estimate = LD_ESTIMATES[dynamics.config.ld]
 
@@ -60,8 +62,12 @@ def model_world(
         if env_reward is not None:
             reward = env_reward(obs, action, next_obs)
         stop = stop_draw(key, p_stop) if ld_stop else jnp.zeros_like(ld, bool)
+        outside = ~dynamics.within_bounds(model, next_obs)
         terminated = is_terminal(next_obs)
-        return next_obs, world, reward, terminated, stop, {"ld": ld}
+        extras = {"ld": ld}
+        if model.bounds is not None:
+            extras["outside"] = outside & ~terminated
+        return next_obs, world, reward, terminated, stop | outside, extras
 
     return step
 

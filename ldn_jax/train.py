@@ -298,6 +298,9 @@ class Trainer:
             ld = imagined.extras["ld"]
             metrics["ld_mean"] = (ld * weight).sum() / weight.sum()
             metrics["ld_histogram"] = ld_histogram(ld, weight)  # Figure 5's data
+            if "outside" in imagined.extras:  # share of imagined episodes that left the box
+                outside = (imagined.extras["outside"] * weight).sum()
+                metrics["imagined_outside"] = outside / jnp.maximum(imagined.ended.sum(), 1.0)
             length, total = imagined.mean_episode()
             metrics["imagined_length"], metrics["imagined_return"] = length, total
             metrics.update({f"imagined_{n}": v for n, v in imagined.losses.items()})

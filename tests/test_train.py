@@ -5,6 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from ldn_jax.buffer import Transitions, buffer_add, buffer_init
 from ldn_jax.config import AgentConfig, ModelConfig, from_preset
 from ldn_jax.dynamics import Dynamics
 from ldn_jax.imagination import model_world
@@ -116,9 +117,9 @@ def test_mean_episode_without_reset_is_the_mean_length_and_return():
     np.testing.assert_allclose(float(length), 10 / 3, rtol=1e-6)
 
 
-def _imagine(ld_stop, trained):
+def _imagine(ld_stop, trained, bounds=None):
     dynamics = Dynamics(ModelConfig(), obs_size=4, action_size=2)
-    model = dynamics.init(jax.random.key(0))
+    model = dynamics.init(jax.random.key(0)).replace(bounds=bounds)
     if trained:  # move M1 far from M0: LD near 1
         model = model.replace(params=jax.tree.map(lambda p: p + 3.0, model.params))
     learner = A2C(AgentConfig(), obs_size=4, action_spec=2)
@@ -150,6 +151,46 @@ def test_ld_stop_off_runs_to_the_limit_and_trained_model_runs_longer():
     lengths = np.asarray(trained.lengths)
     for w in range(weight.shape[1]):  # no weight after the stop
         assert (weight[: lengths[w], w] == 1).all() and (weight[lengths[w] :, w] == 0).all()
+
+
+def test_prediction_outside_the_real_box_truncates_the_imagined_episode():
+    free = _imagine(ld_stop=False, trained=True)
+    path = np.asarray(free.steps.next_obs)  # [T, W, 4], all 50 steps live
+    low, high = path[:10].min(axis=(0, 1)), path[:10].max(axis=(0, 1))
+    boxed = _imagine(ld_stop=False, trained=True, bounds=(jnp.asarray(low), jnp.asarray(high)))
+    outside = ((path < low) | (path > high)).any(axis=-1)  # [T, W]
+    expected = np.where(outside.any(axis=0), outside.argmax(axis=0) + 1, 50)
+    assert 10 < expected.min() < 50  # some leave the box, none too soon
+    np.testing.assert_array_equal(np.asarray(boxed.lengths), expected)
+    last = np.asarray(boxed.lengths) - 1, np.arange(path.shape[1])
+    steps = boxed.steps
+    assert np.asarray(steps.done)[last].all() and not np.asarray(steps.terminated).any()
+
+
+def test_buffer_bounds_span_live_observations_and_widen_by_the_support():
+    buffer = buffer_add(
+        buffer_init(6, obs_size=2, action_size=1),
+        Transitions(
+            obs=jnp.array([[0.0, 5.0], [1.0, 4.0], [9.0, 9.0]]),
+            action=jnp.zeros((3, 1)),
+            next_obs=jnp.array([[1.0, 4.0], [2.0, 3.0], [9.0, 9.0]]),
+            reward=jnp.zeros(3),
+        ),
+        jnp.array([True, True, False]),  # the third row is not stored
+    )
+    dynamics = Dynamics(ModelConfig(support=0.5), obs_size=2, action_size=1)
+    low, high = dynamics.buffer_bounds(buffer)
+    np.testing.assert_allclose(np.asarray(low), [-1.0, 2.0])  # [0, 2] and [3, 5], +- half
+    np.testing.assert_allclose(np.asarray(high), [3.0, 6.0])
+    empty = dynamics.buffer_bounds(buffer_init(6, obs_size=2, action_size=1))
+    assert np.isinf(np.asarray(empty)).all()
+    state = dynamics.init(jax.random.key(0))
+    assert dynamics.within_bounds(state, jnp.full((2,), 1e30))  # unbounded before a fit
+    fitted, _ = dynamics.fit(state, buffer, jax.random.key(1))
+    np.testing.assert_array_equal(
+        np.asarray(dynamics.within_bounds(fitted, jnp.array([[3.0, 6.0], [3.1, 6.0]]))),
+        [True, False],
+    )
 
 
 def _config(**overrides):
@@ -186,6 +227,20 @@ def test_m0_is_bitwise_frozen_and_m1_moves(algo):
         assert config.algo.startswith("ppo")
         rows = config.agent.n_steps * config.workers
         np.testing.assert_array_equal(final.memory.count, final.imagined_steps % rows)
+
+
+def test_support_box_is_the_buffers_and_episodes_that_leave_it_are_counted():
+    trainer = Trainer(_config(algo="a2c-model", model={"support": 0.0}))
+    final, history = _run_chunks(trainer, trainer.init_batch())
+    outside = np.concatenate([h["imagined_outside"] for h in history], axis=-1)
+    assert ((outside >= 0) & (outside <= 1)).all() and outside.max() > 0
+    final = jax.device_get(final)
+    size = int(final.buffer.size[0, 1])
+    seen = np.concatenate(
+        [final.buffer.data.obs[0, 1, :size], final.buffer.data.next_obs[0, 1, :size]]
+    )
+    np.testing.assert_array_equal(final.model.bounds[0][0, 1], seen.min(axis=0))
+    np.testing.assert_array_equal(final.model.bounds[1][0, 1], seen.max(axis=0))
 
 
 def test_imagined_batch_fills_a_whole_segment_with_back_to_back_episodes():

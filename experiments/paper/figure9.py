@@ -1,6 +1,6 @@
 """Figure 9: the learning-degree gain K in {0.5, 1, 2} (eq. 6) for MBRL-LDN, one vmapped run
-per env (every K shares the seeds' initialisations): cartpole-v2, and the scale's MuJoCo tasks
-(inverted_pendulum on CPU, all six at `--scale paper`).
+per env (every K shares the seeds' initialisations): cartpole-v2, and the six MuJoCo tasks
+(the CPU scale at budgets in env steps).
 
     python experiments/paper/figure9.py [--scale cpu|paper] [--smoke] [--results DIR]
 
@@ -54,6 +54,7 @@ def panel(entry: dict) -> dict:
         "env": entry["env"],
         "seeds": entry["config"].seeds,
         "episodes": entry["config"].episodes,
+        "budget": common.budget_text(entry["config"]),
         "threshold": entry["summary"]["threshold"],
         "rows": rows(entry),
     }
@@ -81,7 +82,7 @@ def figure(entries: list[dict], panels: list[dict], path: Path) -> None:
             right.set_ylabel(f"episodes to moving return {threshold:g}")
             ticks = [f"K={r['k']:g}\n{r['reached']}/{r['runs']}" for r in data["rows"]]
         else:
-            right.set_ylabel(f"moving return after {data['episodes']:,} episodes")
+            right.set_ylabel(f"moving return after {data['budget']}")
             ticks = [f"K={r['k']:g}" for r in data["rows"]]
         right.set_xticks(range(len(data["rows"])), ticks)
         right.grid(alpha=0.3, axis="y")

@@ -113,6 +113,12 @@ def mann_whitney(x: list, y: list) -> str:
     return "too few runs to test" if p is None else f"Mann-Whitney p = {p:.2g}"
 
 
+def budget(record: dict) -> str:
+    """A run's budget per seed as its result file states it (files from before step
+    budgets give episodes only)."""
+    return record.get("budget") or f"{record['episodes']:,} episodes"
+
+
 # -- sections ------------------------------------------------------------------------------------
 
 
@@ -123,11 +129,17 @@ def setup(data: dict, scale: common.Scale) -> Section:
     run = "make paper" + ("" if scale.name == "cpu" else f" SCALE={scale.name}")
     if scale.name == "smoke":
         run = "python experiments/paper/all.py --smoke"
+    budgets = {
+        env: ", ".join(f"{n:,} {unit}" for unit, n in b.items())
+        for env, b in scale.mujoco_budgets.items()
+    }
+    left_out = [env for env in common.MUJOCO if env not in budgets]
     mujoco = (
-        f"{scale.mujoco_seeds} seeds per run; budgets "
-        + ", ".join(f"{env} {n:,} episodes" for env, n in scale.mujoco_episodes.items())
-        + "; the other tasks are pending at this scale."
-        if scale.mujoco_episodes
+        f"{scale.mujoco_seeds} seeds per run (the native MuJoCo engine on CPU); budgets per "
+        "seed "
+        + ", ".join(f"{env} {b}" for env, b in budgets.items())
+        + (f"; pending at this scale: {', '.join(left_out)}." if left_out else ".")
+        if budgets
         else "not run at this scale."
     )
     scripts = ("table2", "table3", "figure4", "figure5", "figure9", "calibration")
@@ -378,7 +390,7 @@ def figure9_section(data: dict) -> Section:
     section = Section(TITLES["figure9"], [intro])
     for panel in data["panels"]:
         section.blocks += [
-            f"**{panel['env']}** ({panel['seeds']} seeds, {panel['episodes']:,} episodes each):",
+            f"**{panel['env']}** ({panel['seeds']} seeds, {budget(panel)} each):",
             figure9_table(panel),
         ]
         section.findings += figure9_findings(panel)
@@ -633,18 +645,19 @@ def _pending_note(table: dict) -> list[str]:
 def table4_section(table: dict) -> Section:
     intro = (
         f'Final moving return (our reading of "total moving reward"), {table["seeds"]} seeds '
-        "per run, continuous actions through MJX (the model predicts standardised state deltas; "
-        "README). The paper's values exceed what some tasks can score, so compare the two "
+        "per run, continuous actions (the model predicts standardised state deltas; README). "
+        "The paper's values exceed what some tasks can score, so compare the two "
         "algorithms, not the values. Curves: ![table 4](table4/table4.png)"
     )
-    header = ["env", "algorithm", "episodes per seed", "env steps per seed"]
+    header = ["env", "algorithm", "budget", "episodes per seed", "env steps per seed"]
     header += ["final moving return: mean ± s.d.", "min", "max", "greedy eval return", "paper"]
     done = [r for r in table["rows"] if r["status"] == "done"]
     rows = [
         [
             r["env"],
             algo_name(r["algo"]),
-            f"{r['episodes']:,}",
+            budget(r),
+            fmt(r.get("episodes_per_seed", r["episodes"]), 0),
             fmt(r["env_steps_per_seed"], 0),
             pm(r["mean"], r["sd"]),
             fmt(r["min"]),
@@ -668,7 +681,7 @@ def table4_section(table: dict) -> Section:
         else:
             verdict = "NOT reproduced: A3C-Model higher (the paper: MBRL-LDN higher)"
         findings.append(
-            f"Table 4, {env} ({ldn['episodes']:,} episodes): MBRL-LDN {ldn['mean']:.1f} vs "
+            f"Table 4, {env} ({budget(ldn)}): MBRL-LDN {ldn['mean']:.1f} vs "
             f"A3C-Model {model['mean']:.1f} final moving return ({test}; paper "
             f"{ldn['paper']} vs {model['paper']}): {verdict}."
         )

@@ -6,7 +6,7 @@ episodes to reach the top.
 The paper does not define "the top". Ours, per task: 90% of the highest moving return any
 run of the three algorithms reached (`TOP_FRACTION`); a run's episodes to the top count real
 episodes until its moving return first reaches it (a run that never does is counted in
-*reached*). The CPU scale runs inverted_pendulum; `--scale paper` all three tasks. Writes
+*reached*). Both scales run all three tasks (the CPU scale at budgets in env steps). Writes
 table5.json, table5.csv and table5.png into DIR/table5/.
 """
 
@@ -77,6 +77,8 @@ def rows(entries: list[dict]) -> list[dict]:
                 **common.describe(to_top),
                 episodes_to_top=to_top,
                 episodes=entry["config"].episodes,
+                budget=common.budget_text(entry["config"]),
+                episodes_per_seed=common.episodes_per_seed(entry["dir"]),
                 final_moving_return=common.describe([r["final_moving_return"] for r in runs]),
                 eval_return=common.describe([r["eval_return"] for r in runs]),
                 env_steps_per_seed=common.env_steps_per_seed(entry["dir"]),
