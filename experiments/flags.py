@@ -59,6 +59,7 @@ CONFIG_FLAGS = {
     "ld": "model.ld",
     "ensemble_size": "model.ensemble",
     "imagine": "model.imagine",
+    "support": "model.support",
 }
 """CLI flag (its argparse name) -> the config field it sets (`model.X`: a `ModelConfig` field)."""
 
@@ -113,6 +114,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "the paper), memory (PPO only: kept in the imaginary memory until a whole rollout's "
         "worth exists) or batch (back-to-back imagined episodes, a fixed n_steps x workers a "
         "iteration) (default: episodes; memory for the PPO family)",
+    )
+    p.add_argument(
+        "--support",
+        metavar="FRACTION|none",
+        help="stop an imagined episode where M1 predicts an observation outside the box of "
+        "real ones, widened by FRACTION of its width each side; none: never (default: 0.1 "
+        "for MuJoCo tasks, none for CartPole)",
     )
     p.add_argument("--out", help="run directory (default runs/ENV-ALGO-TIME)")
     p.add_argument("--resume", metavar="DIR", help="continue the run in DIR from its checkpoint")
@@ -178,6 +186,8 @@ def build_config(args: argparse.Namespace) -> Config:
             continue
         if flag == "k":
             value = parse_k(value)
+        if flag == "support":
+            value = parse_support(value)
         if field.startswith("model."):
             overrides.setdefault("model", {})[field.split(".", 1)[1]] = value
         else:
@@ -213,6 +223,8 @@ def check_resume_flags(args: argparse.Namespace, config: Config) -> None:
             stored = getattr(stored, part)
         if flag == "backend" and value == "auto" and config.env in envs.mujoco.TASKS:
             value = envs.mujoco.resolve_backend(value)
+        if flag == "support":
+            value = parse_support(value)
         if flag == "k":
             value = parse_k(value)
             stored = tuple(stored)
@@ -232,6 +244,15 @@ def parse_k(text: str) -> tuple[float, ...]:
         return tuple(float(v) for v in text.split(",") if v.strip())
     except ValueError:
         raise UsageError(f"--k must be comma-separated numbers, got {text!r}") from None
+
+
+def parse_support(text: str) -> float | None:
+    if text.strip().lower() == "none":
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise UsageError(f"--support must be a number or none, got {text!r}") from None
 
 
 def flag_name(name: str) -> str:

@@ -118,6 +118,15 @@ def test_auto_backend_is_recorded_as_what_it_resolved_to():
     assert run.build_config(run.parse_args([])).backend == "auto"  # CartPole has no engine
 
 
+def test_support_flag_sets_the_box_or_turns_it_off():
+    from experiments import flags as run
+
+    support = lambda *flags: run.build_config(run.parse_args(list(flags))).model.support
+    assert support("--env", "hopper") == 0.1 and support() is None  # MuJoCo / CartPole
+    assert support("--env", "hopper", "--support", "none") is None
+    assert support("--support", "0.25") == 0.25
+
+
 def test_a_model_mujoco_cannot_load_exits_2_with_one_line(tmp_path):
     (tmp_path / "hopper.xml").write_text("<mujoco><worldbody>")
     code = (
