@@ -74,9 +74,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument(
         "--episodes",
         type=int,
-        help=f"real episodes per seed and K (default {d.episodes}; MuJoCo tasks 16, but "
-        "inverted_pendulum --steps 600000 and halfcheetah --steps 1000000: CPU budgets, "
-        "raise them on a GPU)",
+        help=f"real episodes per seed and K (default {d.episodes} for CartPole; MuJoCo tasks "
+        "default to --steps instead: 600000 for inverted_pendulum, 1000000 for the others)",
     )
     p.add_argument(
         "--steps",
