@@ -17,6 +17,9 @@ from ldn_jax.networks import DynamicsModel
 
 Array = jax.Array
 
+MIN_WIDTH = 1e-3
+"""The narrowest box side `buffer_bounds` widens from, and the floor of the normaliser's std."""
+
 
 @struct.dataclass
 class Normalizer:
@@ -148,13 +151,16 @@ class Dynamics:
 
     def buffer_bounds(self, buffer: Buffer) -> tuple[Array, Array]:
         """The box of the buffer's valid observations (before and after each step), widened
-        on each side by `config.support` times its width; unbounded while the buffer is
-        empty."""
+        on each side by `config.support` times its width (at least `MIN_WIDTH`); unbounded
+        while the buffer is empty."""
         valid = jnp.tile(jnp.arange(buffer.capacity) < buffer.size, 2)[:, None]
         obs = jnp.concatenate([buffer.data.obs, buffer.data.next_obs])
         low = jnp.min(jnp.where(valid, obs, jnp.inf), axis=0)
         high = jnp.max(jnp.where(valid, obs, -jnp.inf), axis=0)
-        margin = self.config.support * (high - low)
+        # A dimension the data never varied in (ant's contact forces of bodies that never
+        # touch) gets the width of the normaliser's std floor, or every prediction's rounding
+        # would leave the box.
+        margin = self.config.support * jnp.maximum(high - low, MIN_WIDTH)
         unbounded_low, unbounded_high = self._unbounded()
         empty = buffer.size == 0
         return (
@@ -178,7 +184,7 @@ class Dynamics:
             w = valid.reshape((-1,) + (1,) * (x.ndim - 1))
             mean = (x * w).sum(0) / count
             var = (jnp.square(x - mean) * w).sum(0) / count
-            return mean, jnp.maximum(jnp.sqrt(var), 1e-3)
+            return mean, jnp.maximum(jnp.sqrt(var), MIN_WIDTH)
 
         obs_mean, obs_std = moments(buffer.data.obs)
         reward_mean, reward_std = moments(buffer.data.reward)

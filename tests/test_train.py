@@ -7,7 +7,7 @@ import pytest
 
 from ldn_jax.buffer import Transitions, buffer_add, buffer_init
 from ldn_jax.config import AgentConfig, ModelConfig, from_preset
-from ldn_jax.dynamics import Dynamics
+from ldn_jax.dynamics import MIN_WIDTH, Dynamics
 from ldn_jax.imagination import model_world
 from ldn_jax.learners.a2c import A2C
 from ldn_jax.rollout import play_episodes
@@ -182,6 +182,15 @@ def test_buffer_bounds_span_live_observations_and_widen_by_the_support():
     low, high = dynamics.buffer_bounds(buffer)
     np.testing.assert_allclose(np.asarray(low), [-1.0, 2.0])  # [0, 2] and [3, 5], +- half
     np.testing.assert_allclose(np.asarray(high), [3.0, 6.0])
+    constant = buffer_add(  # a dimension the data never varied in widens from MIN_WIDTH
+        buffer_init(2, obs_size=1, action_size=1),
+        Transitions(jnp.ones((2, 1)), jnp.zeros((2, 1)), jnp.ones((2, 1)), jnp.zeros(2)),
+        jnp.ones(2, bool),
+    )
+    low, high = Dynamics(ModelConfig(support=0.5), 1, 1).buffer_bounds(constant)
+    np.testing.assert_allclose(
+        np.asarray([low, high]).ravel(), [1 - 0.5 * MIN_WIDTH, 1 + 0.5 * MIN_WIDTH]
+    )
     empty = dynamics.buffer_bounds(buffer_init(6, obs_size=2, action_size=1))
     assert np.isinf(np.asarray(empty)).all()
     state = dynamics.init(jax.random.key(0))
