@@ -215,17 +215,16 @@ def test_smoke_mujoco_tables_run_inverted_pendulum_and_list_the_rest(smoke):
             assert len(list(csv.DictReader(f))) == len(_json(results, name)["rows"])
 
 
-def test_cpu_scale_runs_every_mujoco_task_on_a_step_budget():
+def test_cpu_scale_runs_every_mujoco_task_on_its_budget():
     common = report.common
     scale = common.SCALES["cpu"]
     assert set(scale.ablation_envs) == set(scale.learning_envs) == set(common.MUJOCO)
     for env in common.MUJOCO:
         config = common.run_config(scale, env, "ldn", k=(0.5, 1.0, 2.0))
-        assert config.steps == common.MUJOCO_CPU_STEPS[env] and config.seeds == 5
-        assert common.budget_text(config) == f"{common.MUJOCO_CPU_STEPS[env]:,} steps"
-    assert common.budget_text(
-        common.run_config(common.SCALES["smoke"], "inverted_pendulum", "ldn")
-    ) == ("8 episodes")
+        [(unit, n)] = common.MUJOCO_CPU_BUDGETS[env].items()
+        assert (config.steps if unit == "steps" else config.episodes) == n and config.seeds == 5
+        assert config.steps is None or unit == "steps"
+        assert common.budget_text(config) == f"{n:,} {unit}"
 
 
 def test_episodes_to_the_top_reads_the_per_episode_moving_return():

@@ -1,6 +1,6 @@
 """Figure 9: the learning-degree gain K in {0.5, 1, 2} (eq. 6) for MBRL-LDN, one vmapped run
 per env (every K shares the seeds' initialisations): cartpole-v2, and the six MuJoCo tasks
-(the CPU scale at budgets in env steps).
+(the CPU scale at short budgets).
 
     python experiments/paper/figure9.py [--scale cpu|paper] [--smoke] [--results DIR]
 

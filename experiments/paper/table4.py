@@ -4,7 +4,7 @@
 
 "Total moving reward" is read as the final moving return (the paper's numbers exceed what
 some tasks can score in 1,000 steps, so compare the two algorithms, not the values). Both
-scales run all six tasks: the CPU scale at budgets in env steps (`common.MUJOCO_CPU_STEPS`),
+scales run all six tasks: the CPU scale at short budgets (`common.MUJOCO_CPU_BUDGETS`),
 `--scale paper` at 4,000 episodes. Writes table4.json, table4.csv and
 table4.png (learning curves per task) into DIR/table4/.
 """

@@ -6,7 +6,7 @@ episodes to reach the top.
 The paper does not define "the top". Ours, per task: 90% of the highest moving return any
 run of the three algorithms reached (`TOP_FRACTION`); a run's episodes to the top count real
 episodes until its moving return first reaches it (a run that never does is counted in
-*reached*). Both scales run all three tasks (the CPU scale at budgets in env steps). Writes
+*reached*). Both scales run all three tasks (the CPU scale at short budgets). Writes
 table5.json, table5.csv and table5.png into DIR/table5/.
 """
 
