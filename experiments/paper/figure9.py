@@ -55,6 +55,8 @@ def panel(entry: dict) -> dict:
         "seeds": entry["config"].seeds,
         "episodes": entry["config"].episodes,
         "budget": common.budget_text(entry["config"]),
+        "train_seconds": entry["summary"]["train_seconds"],
+        "compile_seconds": entry["summary"]["compile_seconds"],
         "threshold": entry["summary"]["threshold"],
         "rows": rows(entry),
     }

@@ -150,11 +150,11 @@ def setup(data: dict, scale: common.Scale) -> Section:
         "stated. Episodes to threshold count real episodes in completion order; a run that never "
         "reaches the threshold within the budget is left out of mean and s.d. and counted in "
         "*reached*.",
-        f"MuJoCo (Tables 4 and 5, Figure 9's MuJoCo panels): {mujoco}",
+        f"MuJoCo (Tables 4 and 5, Figure 9's MuJoCo panels): {mujoco}{mujoco_time(data)}",
         f"Machine: {machine['cpu']}, {machine['cores']} cores, JAX backend "
         f"{machine['jax_backend']}; jax {machine['jax']}, jaxlib {machine['jaxlib']}, Python "
-        f"{machine['python']}; results dated {machine['date']}. The CPU was shared with other "
-        "jobs, so seconds are indicative.",
+        f"{machine['python']}; results dated {dated(data) or machine['date']}. The CPU was "
+        "shared with other jobs, so seconds are indicative.",
         f"Commands: `{run}` (that is, `python experiments/paper/all.py {flag}`), "
         "or one script at a time: "
         + ", ".join(f"`python experiments/paper/{n}.py {flag}`" for n in scripts)
@@ -164,6 +164,34 @@ def setup(data: dict, scale: common.Scale) -> Section:
         "reused when their config matches.",
     ]
     return Section("Setup", [Bullets(items)])
+
+
+def dated(data: dict) -> str:
+    """When each result file was made: "2026-12-01" or "2026-11-22 (table2, ...), 2026-12-01
+    (table4, ...)"; "" without files."""
+    by_date: dict[str, list[str]] = {}
+    for name, d in data.items():
+        if d and "machine" in d:
+            by_date.setdefault(d["machine"]["date"], []).append(name)
+    if len(by_date) < 2:
+        return next(iter(by_date), "")
+    return ", ".join(f"{date} ({', '.join(names)})" for date, names in sorted(by_date.items()))
+
+
+def mujoco_time(data: dict) -> str:
+    """The sentence giving the MuJoCo runs' wall time in the result files (training and
+    compile, summed over runs; each run's seeds and K are one vmapped program), or ""."""
+    runs = [r for r in (data.get("table4") or {}).get("rows", []) if r["status"] == "done"]
+    runs += [r for r in (data.get("table5") or {}).get("rows", []) if r["status"] == "done"]
+    panels = [p for p in (data.get("figure9") or {}).get("panels", []) if p["env"] in common.MUJOCO]
+    timed = [*runs, *(p for p in panels if "train_seconds" in p)]
+    if not timed:
+        return ""
+    seconds = sum(r["train_seconds"] + r["compile_seconds"] for r in timed)
+    return (
+        f" Wall time of these {len(timed)} runs: {seconds / 60:.0f} minutes of training and "
+        "compile in all (evaluation and the scripts' own work not counted)."
+    )
 
 
 def _pending(r: dict, columns: int) -> list[str]:
