@@ -91,6 +91,7 @@ def play_episodes(
     max_steps: int,
     reset: Callable[[Array], tuple[Array, Any]] | None = None,
     learn: bool = True,
+    observe: bool = False,
 ) -> tuple[LearnerState, Episodes]:
     """Play one episode on each of W workers, updating the learner every `n_steps` steps.
 
@@ -104,6 +105,9 @@ def play_episodes(
 
     `learn=False`: only play (the learner's parameters act throughout and are returned
     unchanged; `losses` is empty), for a learner that learns from the whole batch later.
+
+    `observe=True` (real episodes): each segment's observations go into the learner's
+    running observation statistics (`AgentConfig.normalize_obs`) before it learns from it.
     """
     n_steps = learner.config.n_steps
     n_segments = math.ceil(max_steps / n_steps)
@@ -150,6 +154,10 @@ def play_episodes(
     def segment(carry: EpisodeCarry, key: Array):
         k_steps, k_update = jax.random.split(key)
         carry, (transitions, extras) = jax.lax.scan(step, carry, jax.random.split(k_steps, n_steps))
+        if observe:
+            carry = carry.replace(
+                learner=learner.observe(carry.learner, transitions.obs, transitions.weight)
+            )
         if not learn:
             return carry, (transitions, extras, {})
         learner_state, losses = learner.update(carry.learner, transitions, k_update)

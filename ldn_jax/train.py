@@ -150,7 +150,14 @@ class Trainer:
         k_reset, k_play = jax.random.split(key)
         obs, env_state = self._reset(k_reset)
         learner, episodes = play_episodes(
-            k_play, state.learner, self.learner, self._env_world, obs, env_state, self.max_steps
+            k_play,
+            state.learner,
+            self.learner,
+            self._env_world,
+            obs,
+            env_state,
+            self.max_steps,
+            observe=True,
         )
         return state.replace(learner=learner), episodes
 

@@ -7,7 +7,7 @@ import pytest
 
 from ldn_jax.config import AgentConfig, from_preset
 from ldn_jax.learners import A2C, PPO
-from ldn_jax.learners.base import Gaussian, Segment
+from ldn_jax.learners.base import OBS_CLIP, Gaussian, Segment, merge_moments, training_reward
 
 
 class Box:
@@ -91,6 +91,99 @@ def test_masked_continuous_steps_change_nothing_bitwise():
     dirty, _ = jax.jit(learner.update)(state, garbage, jax.random.key(2))
     for a, b in zip(jax.tree.leaves(clean), jax.tree.leaves(dirty), strict=True):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
+def test_running_moments_equal_numpy_over_all_live_rows_in_any_batching():
+    rng = np.random.default_rng(0)
+    x = rng.normal(3.0, [0.5, 2.0, 10.0], size=(60, 3)).astype(np.float32)
+    weight = (rng.random(60) > 0.3).astype(np.float32)
+    x_dirty = np.where(weight[:, None] > 0, x, np.nan)  # masked rows may hold anything
+    stats = {"mean": jnp.zeros(3), "var": jnp.ones(3), "count": jnp.zeros(())}
+    for rows in (slice(0, 7), slice(7, 7), slice(7, 41), slice(41, 60)):
+        stats = merge_moments(stats, jnp.asarray(x_dirty[rows]), jnp.asarray(weight[rows]))
+    live = x[weight > 0]
+    assert float(stats["count"]) == len(live)
+    np.testing.assert_allclose(np.asarray(stats["mean"]), live.mean(0), rtol=1e-5)
+    np.testing.assert_allclose(np.asarray(stats["var"]), live.var(0), rtol=1e-4)
+    empty = merge_moments(stats, jnp.asarray(x_dirty[:5]), jnp.zeros(5))
+    for a, b in zip(jax.tree.leaves(empty), jax.tree.leaves(stats), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
+@pytest.mark.parametrize("learner_cls", [A2C, PPO])
+def test_observation_statistics_standardise_inputs_and_no_gradient_moves_them(learner_cls):
+    agent = AgentConfig(normalize_obs=True)
+    learner = learner_cls(agent, obs_size=2, action_spec=Box((-1.0,), (1.0,)))
+    state = learner.init(jax.random.key(0))
+    obs = jnp.array([[[10.0, -4.0]], [[30.0, -4.0]], [[1e6, 1e6]]])  # [n=3, W=1, 2]
+    state = learner.observe(state, obs, jnp.array([[1.0], [1.0], [0.0]]))
+    stats = state.params["obs_norm"]
+    np.testing.assert_allclose(np.asarray(stats["mean"]), [20.0, -4.0])
+    np.testing.assert_allclose(np.asarray(stats["var"]), [100.0, 0.0])
+    z = learner.normalized(state.params, jnp.array([30.0, -3.0]))
+    np.testing.assert_allclose(np.asarray(z), [1.0, OBS_CLIP], rtol=1e-5)
+    # The policy's input is the standardised observation.
+    plain = learner_cls(AgentConfig(), obs_size=2, action_spec=Box((-1.0,), (1.0,)))
+    same = {k: v for k, v in state.params.items() if k != "obs_norm"}
+    np.testing.assert_allclose(
+        np.asarray(learner.logits(state.params, jnp.array([30.0, -3.0]))),
+        np.asarray(plain.logits(same, z)),
+        rtol=1e-6,
+    )
+    segment = _bandit_segment(jax.random.key(1), n=4, workers=2)
+    new, _ = jax.jit(learner.update)(state, segment, jax.random.key(2))
+    for a, b in zip(jax.tree.leaves(new.params["obs_norm"]), jax.tree.leaves(stats), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    assert not np.allclose(
+        np.asarray(new.params["actor"]["params"]["Dense_0"]["kernel"]),
+        np.asarray(state.params["actor"]["params"]["Dense_0"]["kernel"]),
+    )
+    assert "obs_norm" not in plain.init(jax.random.key(0)).params
+
+
+def test_reward_scale_multiplies_the_training_reward_after_the_terminal_one():
+    segment = _bandit_segment(jax.random.key(0), n=2, workers=1)
+    segment = segment.replace(terminated=jnp.array([[False], [True]]))
+    agent = AgentConfig(reward_scale=0.1, terminal_reward=-5.0)
+    np.testing.assert_allclose(
+        np.asarray(training_reward(segment, agent)),
+        [[0.1 * float(segment.reward[0, 0])], [-0.5]],
+        rtol=1e-6,
+    )
+
+
+def test_a_saved_policy_standardises_observations_with_its_own_statistics(tmp_path):
+    from experiments.training import train
+    from ldn_jax import load_policy
+    from ldn_jax.run_dir import RunDir
+    from ldn_jax.train import Trainer
+
+    config = from_preset(
+        "paper", env="cartpole-v1", algo="ppo", seeds=1, episodes=8, workers=4,
+        agent={"normalize_obs": True},
+    )  # fmt: skip
+    summary = train(config, tmp_path, checkpoint_every=0, quiet=True)
+    trainer = Trainer(config)
+    state = RunDir(tmp_path).restore_final(jax.eval_shape(trainer.init_batch))
+    params = jax.tree.map(lambda x: x[0, 0], state.learner.params)
+    stats = params["obs_norm"]
+    assert int(stats["count"]) == summary["env_steps"]
+    act = load_policy(tmp_path)
+    rng = np.random.default_rng(0)
+    for obs in rng.normal(0.0, 0.1, size=(20, 4)).astype(np.float32):
+        z = np.clip((obs - stats["mean"]) / np.sqrt(stats["var"] + 1e-8), -OBS_CLIP, OBS_CLIP)
+        logits = trainer.learner.actor.apply(params["actor"], jnp.asarray(z))
+        assert act(obs) == int(np.argmax(logits))
+
+
+def test_locomotion_ppo_scales_rewards_and_standardises_observations():
+    for env in ("halfcheetah", "hopper", "walker2d", "ant"):
+        agent = from_preset("paper", env=env, algo="ppo-ldn").agent
+        assert agent.normalize_obs and agent.reward_scale == 0.1
+        assert not from_preset("paper", env=env, algo="ldn").agent.normalize_obs
+    for env in ("inverted_pendulum", "reacher", "cartpole-v1"):
+        agent = from_preset("paper", env=env, algo="ppo").agent
+        assert not agent.normalize_obs and agent.reward_scale == 1.0
 
 
 def test_continuous_defaults_normalise_the_model():

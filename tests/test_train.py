@@ -252,6 +252,18 @@ def test_support_box_is_the_buffers_and_episodes_that_leave_it_are_counted():
     np.testing.assert_array_equal(final.model.bounds[1][0, 1], seen.max(axis=0))
 
 
+@pytest.mark.parametrize("algo", ["ldn", "ppo-ldn"])
+def test_observation_statistics_count_every_real_step_and_no_imagined_one(algo):
+    trainer = Trainer(_config(algo=algo, agent={"normalize_obs": True}))
+    final, history = _run_chunks(trainer, trainer.init_batch())
+    final = jax.device_get(final)
+    stats = final.learner.params["obs_norm"]
+    assert int(final.imagined_steps.min()) > 0
+    np.testing.assert_array_equal(stats["count"], final.env_steps)
+    assert np.isfinite(stats["mean"]).all() and (stats["var"] > 0).all()
+    assert all(np.isfinite(h["real_actor_loss"]).all() for h in history)
+
+
 def test_imagined_batch_fills_a_whole_segment_with_back_to_back_episodes():
     trainer = Trainer(_config(model={"imagine": "batch"}))
     state = trainer.init_state(jax.random.key(0))  # M1 == M0: LD 0, every episode 1 step

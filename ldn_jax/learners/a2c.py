@@ -58,10 +58,7 @@ class A2C(ActorCritic):
             eps=config.rmsprop_eps,
             initial_scale=1.0,  # TensorFlow 1's RMSProp starts its average at one
         )
-        self.optimizer = optax.multi_transform(
-            {"actor": rmsprop(config.actor_lr), "critic": rmsprop(config.critic_lr)},
-            {"actor": "actor", "critic": "critic"},
-        )
+        self.optimizer = self.per_net(rmsprop(config.actor_lr), rmsprop(config.critic_lr))
 
     def loss(self, params: dict, segment: Segment) -> tuple[Array, dict]:
         """The A3C loss of a canonical segment (masked steps zeroed), averaged over workers."""

@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import optax
 from flax import struct
 
 from ldn_jax.config import AgentConfig
 from ldn_jax.networks import MLP
 
 Array = jax.Array
+
+OBS_CLIP = 10.0
+"""Standardised observations are clipped to this many standard deviations (SB3's default)."""
 
 
 @struct.dataclass
@@ -56,10 +60,12 @@ def canonical(segment: Segment) -> Segment:
 
 
 def training_reward(segment: Segment, config: AgentConfig) -> Array:
-    """The reward the learner trains on: the env's, or `terminal_reward` on terminal steps."""
-    if config.terminal_reward is None:
-        return segment.reward
-    return jnp.where(segment.terminated, config.terminal_reward, segment.reward)
+    """The reward the learner trains on: the env's, or `terminal_reward` on terminal steps,
+    times `reward_scale`."""
+    reward = segment.reward
+    if config.terminal_reward is not None:
+        reward = jnp.where(segment.terminated, config.terminal_reward, reward)
+    return reward if config.reward_scale == 1.0 else reward * config.reward_scale
 
 
 def worker_mean(x: Array, weight: Array) -> Array:
@@ -90,6 +96,33 @@ def keep_if_any(new, old, weight: Array):
     """
     any_live = weight.sum() > 0
     return jax.tree.map(lambda n, o: jnp.where(any_live, n, o), new, old)
+
+
+def merge_moments(stats: dict, x: Array, weight: Array) -> dict:
+    """Running mean and variance of observations, merged with the live rows of a batch.
+
+    `stats` holds `mean` and `var` `[d]` and `count` `[]`; `x` is `[..., d]` with `weight`
+    `[...]` (0 for masked rows). Chan et al.'s parallel update, exact for any split of the
+    data into batches; a batch without live rows changes nothing.
+    """
+    x = x.reshape((-1, x.shape[-1]))
+    w = weight.reshape((-1,))
+    x = jnp.where(w[:, None] > 0, x, 0.0)  # a masked row's NaN cannot leak
+    n = w.sum()
+    safe_n = jnp.maximum(n, 1.0)
+    batch_mean = (w[:, None] * x).sum(0) / safe_n
+    batch_var = (w[:, None] * jnp.square(x - batch_mean)).sum(0) / safe_n
+    count = stats["count"]
+    total = count + n
+    delta = batch_mean - stats["mean"]
+    mean = stats["mean"] + delta * n / jnp.maximum(total, 1.0)
+    m2 = (
+        stats["var"] * count
+        + batch_var * n
+        + jnp.square(delta) * count * n / jnp.maximum(total, 1.0)
+    )
+    merged = {"mean": mean, "var": m2 / jnp.maximum(total, 1.0), "count": total}
+    return jax.tree.map(lambda new, old: jnp.where(n > 0, new, old), merged, stats)
 
 
 class Categorical:
@@ -203,14 +236,45 @@ class ActorCritic:
             "actor": self.actor.init(k_actor, dummy),
             "critic": self.critic.init(k_critic, dummy),
         }
+        if self.config.normalize_obs:
+            params["obs_norm"] = {
+                "mean": jnp.zeros((self.obs_size,)),
+                "var": jnp.ones((self.obs_size,)),
+                "count": jnp.zeros(()),
+            }
         return LearnerState(params=params, opt_state=self.optimizer.init(params))
+
+    def per_net(self, actor, critic) -> optax.GradientTransformation:
+        """One optimiser for the actor's parameters and one for the critic's; the
+        observation statistics of `normalize_obs`, which no gradient moves, get none."""
+        transforms = {"actor": actor, "critic": critic}
+        if self.config.normalize_obs:
+            transforms["fixed"] = optax.set_to_zero()
+        labels = lambda params: {n: n if n in ("actor", "critic") else "fixed" for n in params}
+        return optax.multi_transform(transforms, labels)
+
+    def observe(self, state: LearnerState, obs: Array, weight: Array) -> LearnerState:
+        """Fold real observations `[..., d]` (rows of weight 0 ignored) into the running
+        statistics of `normalize_obs`; without it, `state` as it is."""
+        if "obs_norm" not in state.params:
+            return state
+        stats = merge_moments(state.params["obs_norm"], obs, weight)
+        return state.replace(params={**state.params, "obs_norm": stats})
+
+    def normalized(self, params: dict, obs: Array) -> Array:
+        """What actor and critic see: `obs`, standardised under `normalize_obs`."""
+        if "obs_norm" not in params:
+            return obs
+        stats = jax.lax.stop_gradient(params["obs_norm"])
+        z = (obs - stats["mean"]) / jnp.sqrt(stats["var"] + 1e-8)
+        return jnp.clip(z, -OBS_CLIP, OBS_CLIP)
 
     def logits(self, params: dict, obs: Array) -> Array:
         """The actor's raw output: logits (discrete) or mean and std pre-activations."""
-        return self.actor.apply(params["actor"], obs)
+        return self.actor.apply(params["actor"], self.normalized(params, obs))
 
     def value(self, params: dict, obs: Array) -> Array:
-        return self.critic.apply(params["critic"], obs)[..., 0]
+        return self.critic.apply(params["critic"], self.normalized(params, obs))[..., 0]
 
     def act(self, params: dict, key: Array, obs: Array) -> Array:
         """Sample from the policy, `[W, obs] -> [W]` (discrete) or `[W, d]` (continuous)."""

@@ -95,12 +95,9 @@ class PPO(ActorCritic):
         super().__init__(config, obs_size, action_spec)
         self.optimizer = optax.chain(
             optax.clip_by_global_norm(config.max_grad_norm),
-            optax.multi_transform(
-                {
-                    "actor": optax.inject_hyperparams(optax.adam)(learning_rate=config.actor_lr),
-                    "critic": optax.inject_hyperparams(optax.adam)(learning_rate=config.critic_lr),
-                },
-                {"actor": "actor", "critic": "critic"},
+            self.per_net(
+                optax.inject_hyperparams(optax.adam)(learning_rate=config.actor_lr),
+                optax.inject_hyperparams(optax.adam)(learning_rate=config.critic_lr),
             ),
         )
 
