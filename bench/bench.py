@@ -33,7 +33,10 @@ from experiments.runtime import compile_chunk, enable_compile_cache  # noqa: E40
 from ldn_jax.config import from_preset  # noqa: E402
 from ldn_jax.train import Trainer  # noqa: E402
 
-SECTIONS = ("env", "train", "rejax", "compile", "scaling", "mujoco")
+sys.path.insert(0, str(ROOT / "bench"))
+import stages  # noqa: E402
+
+SECTIONS = ("env", "train", "ceiling", "stages", "rejax", "compile", "scaling", "mujoco")
 
 
 def _timed(fn, *args):
@@ -288,10 +291,18 @@ def main() -> None:
             for auto_reset in (False, True)
             for n in ((1, 1024) if args.quick else (1, 64, 1024, 8192))
         ]
+    train_size = dict(seeds=2, episodes=160) if args.quick else {}
     if "train" in sections:
-        size = dict(seeds=2, episodes=160) if args.quick else {}
-        result["training"] = [training(algo, **size) for algo in ALGOS]
+        result["training"] = [training(algo, **train_size) for algo in ALGOS]
         _add_overheads(result["training"])
+    if "ceiling" in sections:
+        size = dict(seeds=2, segments=200) if args.quick else {}
+        top = stages.ceiling(**size)
+        rows = result.get("training") or [training(algo, **train_size) for algo in ALGOS]
+        result["ceiling"] = {**top, "ratios": stages.ratios_to_ceiling(rows, top)}
+    if "stages" in sections:
+        size = dict(runs=6, warm_episodes=80) if args.quick else {}
+        result["stages"] = [stages.stages(algo, **size) for algo in ALGOS]
     if "mujoco" in sections:
         result["mujoco"] = mujoco_section(args.quick, args.brax_python)
     if "rejax" in sections:

@@ -1,0 +1,230 @@
+"""Where a training iteration's time goes, and the ceiling it is measured against.
+
+`ceiling`: a minimal synchronous A2C on the JAX CartPole (the paper's nets and constants,
+auto-reset workers, 10-step segments, one RMSProp step each, no masking, no metrics): what
+these cores do when no worker ever waits for another.
+
+`stages`: our trainer's iteration cut into its stages (real episodes with their updates, the
+model fit, imagination, and what is left: metrics, moving return, non-finite guard), each
+jitted and timed apart on the same vmapped states, with the share of computed steps that were
+masked (a worker whose episode had ended, stepping on until the batch's longest ends).
+"""
+
+from __future__ import annotations
+
+import time
+
+import jax
+import jax.numpy as jnp
+import optax
+
+import envs
+from ldn_jax.config import AgentConfig, from_preset
+from ldn_jax.learners.a2c import n_step_targets
+from ldn_jax.networks import MLP
+from ldn_jax.train import Trainer
+
+Array = jax.Array
+
+
+def _best_seconds(fn, *args, repeats: int = 3) -> float:
+    """Fastest of `repeats` calls after one warm-up call (the compile)."""
+    jax.block_until_ready(fn(*args))
+    best = float("inf")
+    for _ in range(repeats):
+        start = time.perf_counter()
+        jax.block_until_ready(fn(*args))
+        best = min(best, time.perf_counter() - start)
+    return best
+
+
+def minimal_a2c(seeds: int, workers: int, segments: int, env_name: str = "cartpole-v1"):
+    """`train(key) -> (a checksum of the final nets [S], episodes ended per segment [S, N])`:
+    `segments` x n_steps x `workers` env steps
+    per seed, vmapped over `seeds`. Written apart from the trainer on purpose: it is the
+    yardstick, so it shares only the env, the network module and the n-step targets."""
+    cfg = AgentConfig()
+    env, params = envs.make(env_name)
+    n_actions = env.action_spec(params).size
+    actor = MLP(cfg.actor_hidden, n_actions, cfg.activation, cfg.init_std)
+    critic = MLP(cfg.critic_hidden, 1, cfg.activation, cfg.init_std)
+    rmsprop = lambda lr: optax.rmsprop(
+        lr, decay=cfg.rmsprop_decay, eps=cfg.rmsprop_eps, initial_scale=1.0
+    )
+    optimizer = optax.multi_transform(
+        {"actor": rmsprop(cfg.actor_lr), "critic": rmsprop(cfg.critic_lr)},
+        {"actor": "actor", "critic": "critic"},
+    )
+    reset = jax.vmap(env.reset, (0, None))
+    step = jax.vmap(env.step, (0, 0, 0, None))
+    obs_size = env.observation_size(params)
+
+    def loss(net, obs, action, reward, next_obs, terminated):
+        value = critic.apply(net["critic"], obs)[..., 0]
+        next_value = jax.lax.stop_gradient(critic.apply(net["critic"], next_obs)[..., 0])
+        targets = n_step_targets(reward, next_value, terminated, terminated, cfg.gamma)
+        advantage = targets - value
+        log_probs = jax.nn.log_softmax(actor.apply(net["actor"], obs))
+        log_prob = jnp.take_along_axis(log_probs, action[..., None], -1)[..., 0]
+        entropy = -(jnp.exp(log_probs) * log_probs).sum(-1)
+        policy = -(log_prob * jax.lax.stop_gradient(advantage)).mean()
+        return policy - cfg.entropy_beta * entropy.mean() + jnp.square(advantage).mean()
+
+    def env_step(carry, key):
+        net, obs, state = carry
+        k_act, k_step, k_reset = jax.random.split(key, 3)
+        action = jax.random.categorical(k_act, actor.apply(net["actor"], obs))
+        next_obs, state, reward, terminated, truncated, _ = step(
+            jax.random.split(k_step, workers), state, action, params
+        )
+        fresh_obs, fresh = reset(jax.random.split(k_reset, workers), params)
+        done = terminated | truncated
+        pick = lambda new, old: jnp.where(done.reshape((-1,) + (1,) * (new.ndim - 1)), new, old)
+        carry = (net, pick(fresh_obs, next_obs), jax.tree.map(pick, fresh, state))
+        return carry, (obs, action, reward, next_obs, terminated.astype(jnp.float32))
+
+    def segment(carry, key):
+        net, opt_state, obs, state = carry
+        (_, obs, state), batch = jax.lax.scan(
+            env_step, (net, obs, state), jax.random.split(key, cfg.n_steps)
+        )
+        grads = jax.grad(loss)(net, *batch)
+        updates, opt_state = optimizer.update(grads, opt_state, net)
+        return (optax.apply_updates(net, updates), opt_state, obs, state), batch[4].sum()
+
+    def train(key):
+        k_actor, k_critic, k_reset, k_run = jax.random.split(key, 4)
+        dummy = jnp.zeros((1, obs_size))
+        net = {"actor": actor.init(k_actor, dummy), "critic": critic.init(k_critic, dummy)}
+        obs, state = reset(jax.random.split(k_reset, workers), params)
+        carry = (net, optimizer.init(net), obs, state)
+        (net, *_), episodes = jax.lax.scan(segment, carry, jax.random.split(k_run, segments))
+        # CartPole's reward is always 1, so a sum of rewards would let XLA drop the whole
+        # loop: the episode count and the weights depend on every step.
+        checksum = sum(leaf.sum() for leaf in jax.tree.leaves(net))
+        return checksum, episodes
+
+    return jax.jit(lambda key: jax.vmap(train)(jax.random.split(key, seeds)))
+
+
+def ceiling(seeds: int = 10, workers: int = 8, segments: int = 1000) -> dict:
+    """Env steps/s of `minimal_a2c` (best of 3 after its compile)."""
+    start = time.perf_counter()
+    train = minimal_a2c(seeds, workers, segments)
+    jax.block_until_ready(train(jax.random.key(0)))
+    compile_s = time.perf_counter() - start
+    seconds = _best_seconds(train, jax.random.key(1))
+    n_steps = AgentConfig().n_steps
+    env_steps = seeds * workers * segments * n_steps
+    _, episodes = train(jax.random.key(1))
+    last = episodes[:, -max(segments // 10, 1) :]  # the last tenth of the run
+    length = last.shape[1] * n_steps * workers / max(float(last.sum(axis=1).mean()), 1.0)
+    return {
+        "what": "minimal synchronous A2C, auto-reset workers, no masking (bench/stages.py)",
+        "env": "cartpole-v1",
+        "seeds": seeds,
+        "workers": workers,
+        "env_steps": env_steps,
+        "compile_s": round(compile_s - seconds, 2),
+        "train_s": round(seconds, 3),
+        "env_steps_per_s": round(env_steps / seconds),
+        "mean_episode_length_last_tenth": round(length, 1),
+    }
+
+
+def ratios_to_ceiling(rows: list[dict], ceiling_row: dict) -> list[dict]:
+    """Each training row's real and real + imagined env steps/s over the ceiling's."""
+    top = ceiling_row["env_steps_per_s"]
+    return [
+        {
+            "algo": row["algo"],
+            "real_over_ceiling": round(row["env_steps_per_s"] / top, 3),
+            "real_plus_imagined_over_ceiling": round(
+                (row["env_steps_per_s"] + row["imagined_steps_per_s"]) / top, 3
+            ),
+        }
+        for row in rows
+    ]
+
+
+def _masked_share(weight: Array, n_steps: int) -> tuple[float, int]:
+    """Share of the steps a vmapped play computed that were masked, and the steps computed.
+
+    `weight` is `[R, T', W]` for R vmapped runs. Under vmap the segment loop runs until the
+    run with the most live segments is done, so every run computes that many segments.
+    """
+    runs, length, workers = weight.shape
+    per_segment = weight.reshape(runs, length // n_steps, n_steps, workers).sum(axis=(2, 3))
+    segments = int((per_segment > 0).sum(axis=1).max())
+    computed = runs * segments * n_steps * workers
+    return 1.0 - float(weight.sum()) / max(computed, 1), computed
+
+
+def stages(algo: str, runs: int = 30, warm_episodes: int = 400, env: str = "cartpole-v1") -> dict:
+    """Seconds per iteration of each stage for `runs` vmapped runs (10 seeds x 3 K where the
+    algorithm uses K, else `runs` seeds), after `warm_episodes` episodes of training (so
+    episodes have their mid-training lengths), and the masked share of each play."""
+    uses_k = algo.endswith("ldn")
+    k = (0.5, 1.0, 2.0) if uses_k else (1.0,)
+    config = from_preset(
+        "paper",
+        env=env,
+        algo=algo,
+        seeds=runs // len(k),
+        k=k,
+        episodes=warm_episodes,
+        workers=8,
+        chunk_iterations=5,
+    )
+    trainer = Trainer(config)
+    states, gains = trainer.init_batch(), trainer.k_values()
+    chunk = trainer.batched_chunk()
+    for _ in range(config.iterations // config.chunk_iterations):
+        states, _ = chunk(states, gains)
+    jax.block_until_ready(states)
+
+    per_run = lambda fn, *axes: jax.jit(jax.vmap(jax.vmap(fn, (0, *axes)), (0, *axes)))
+    # The stages get the keys the iteration itself splits off, so they do its very work.
+    split = jax.vmap(jax.vmap(lambda key: jax.random.split(key, 4)))
+    _, k_real, k_model, k_imagine = jnp.moveaxis(split(states.key), -1, 0)
+    grid_gains = jnp.broadcast_to(gains[:, None], states.env_steps.shape)
+
+    iteration = per_run(trainer.iteration, 0)
+    real = per_run(trainer.real_stage, 0)
+    seconds = {
+        "iteration": _best_seconds(iteration, states, grid_gains),
+        "real": _best_seconds(real, states, k_real),
+    }
+    after_real, episodes = real(states, k_real)
+    flat = lambda w: w.reshape((-1, *w.shape[2:]))
+    n_steps = config.agent.n_steps
+    share, computed = _masked_share(flat(episodes.steps.weight), n_steps)
+    row = {
+        "algo": algo,
+        "runs": states.env_steps.size,
+        "k_values": len(k),
+        "after_episodes": warm_episodes,
+        "real_mean_episode_length": round(float(episodes.steps.weight.sum(2).mean()), 1),
+        "real_masked_share": round(share, 3),
+        "real_steps_computed": computed,
+    }
+    if trainer.dynamics is not None:
+        model = per_run(trainer.model_stage, 0, 0)
+        imagine = per_run(trainer.imagine_stage, 0, 0)
+        seconds["model"] = _best_seconds(model, after_real, episodes, k_model)
+        after_model, _ = model(after_real, episodes, k_model)
+        seconds["imagine"] = _best_seconds(imagine, after_model, k_imagine, grid_gains)
+        _, imagined = imagine(after_model, k_imagine, grid_gains)
+        share, computed = _masked_share(flat(imagined.steps.weight), n_steps)
+        row["imagined_masked_share"] = round(share, 3)
+        row["imagined_steps_computed"] = computed
+        row["imagined_mean_episode_length"] = round(float(imagined.steps.weight.sum(2).mean()), 1)
+    staged = sum(v for name, v in seconds.items() if name != "iteration")
+    seconds["bookkeeping"] = max(seconds["iteration"] - staged, 0.0)
+    row["seconds_per_iteration"] = {name: round(v, 4) for name, v in seconds.items()}
+    row["share_of_iteration"] = {
+        name: round(v / seconds["iteration"], 3)
+        for name, v in seconds.items()
+        if name != "iteration"
+    }
+    return row

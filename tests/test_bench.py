@@ -1,0 +1,32 @@
+"""The bench's own arithmetic (its timings are `make bench`'s business, not the tests')."""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+
+import stages
+
+
+def test_masked_share_counts_the_segments_the_longest_run_forces_on_every_run():
+    # 2 runs, 3 segments of 2 steps, 2 workers. Run 0 is live for 1 segment, run 1 for 3:
+    # under vmap both compute 3 segments, 2 x 3 x 2 x 2 = 24 steps, of which 2 + 8 are live.
+    weight = np.zeros((2, 6, 2), np.float32)
+    weight[0, :2, 0] = 1.0
+    weight[1, :6, 0] = 1.0
+    weight[1, :2, 1] = 1.0
+    share, computed = stages._masked_share(weight, n_steps=2)
+    assert computed == 24
+    np.testing.assert_allclose(share, 1.0 - 10 / 24)
+
+
+def test_ratios_to_ceiling_divide_real_and_real_plus_imagined_rates():
+    rows = [{"algo": "ldn", "env_steps_per_s": 50, "imagined_steps_per_s": 25}]
+    (ratio,) = stages.ratios_to_ceiling(rows, {"env_steps_per_s": 200})
+    assert ratio == {
+        "algo": "ldn",
+        "real_over_ceiling": 0.25,
+        "real_plus_imagined_over_ceiling": 0.375,
+    }
