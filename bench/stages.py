@@ -160,10 +160,34 @@ def _masked_share(weight: Array, n_steps: int) -> tuple[float, int]:
     return 1.0 - float(weight.sum()) / max(computed, 1), computed
 
 
+def _prefix(trainer: Trainer, stages: int):
+    """The first `stages` stages of `trainer.iteration` (1: real, 2: + model fit, 3: +
+    imagination), with the keys the iteration splits; returns the state and one scalar, so
+    that, as inside the iteration, nothing else has to be materialised."""
+
+    def run(state, gain):
+        _, k_real, k_model, k_imagine = jax.random.split(state.key, 4)
+        state, real = trainer.real_stage(state, k_real)
+        if stages >= 2:
+            state, _ = trainer.model_stage(state, real, k_model)
+        if stages >= 3:
+            state, _ = trainer.imagine_stage(state, k_imagine, gain)
+        return state, real.returns.sum()
+
+    return run
+
+
 def stages(algo: str, runs: int = 30, warm_episodes: int = 400, env: str = "cartpole-v1") -> dict:
     """Seconds per iteration of each stage for `runs` vmapped runs (10 seeds x 3 K where the
     algorithm uses K, else `runs` seeds), after `warm_episodes` episodes of training (so
-    episodes have their mid-training lengths), and the masked share of each play."""
+    episodes have their mid-training lengths), and the masked share of each play.
+
+    `seconds_up_to[stage]`: the iteration's stages up to and including it, compiled as one
+    program that returns the state (timed apart, a stage would also pay for writing out what
+    the iteration consumes inside). A stage's own seconds are the difference to the one
+    before, bookkeeping the whole iteration's less the last stage's. XLA compiles each prefix
+    on its own, so a difference can come out below zero: the real stage alone has measured
+    slower than the whole model-free iteration."""
     uses_k = algo.endswith("ldn")
     k = (0.5, 1.0, 2.0) if uses_k else (1.0,)
     config = from_preset(
@@ -183,19 +207,19 @@ def stages(algo: str, runs: int = 30, warm_episodes: int = 400, env: str = "cart
         states, _ = chunk(states, gains)
     jax.block_until_ready(states)
 
-    per_run = lambda fn, *axes: jax.jit(jax.vmap(jax.vmap(fn, (0, *axes)), (0, *axes)))
-    # The stages get the keys the iteration itself splits off, so they do its very work.
+    per_run = lambda fn: jax.jit(jax.vmap(jax.vmap(fn, (0, None)), (0, 0)))
+    count = 3 if trainer.dynamics is not None else 1
+    upto = [_best_seconds(per_run(_prefix(trainer, n)), states, gains) for n in range(1, count + 1)]
+    whole = _best_seconds(per_run(trainer.iteration), states, gains)
+    names = ("real", "model", "imagine")[:count]
+    seconds = {name: upto[i] - (upto[i - 1] if i else 0.0) for i, name in enumerate(names)}
+    seconds["bookkeeping"] = whole - upto[-1]
+
+    # What each play computed: the same keys as the iteration's.
     split = jax.vmap(jax.vmap(lambda key: jax.random.split(key, 4)))
     _, k_real, k_model, k_imagine = jnp.moveaxis(split(states.key), -1, 0)
-    grid_gains = jnp.broadcast_to(gains[:, None], states.env_steps.shape)
-
-    iteration = per_run(trainer.iteration, 0)
-    real = per_run(trainer.real_stage, 0)
-    seconds = {
-        "iteration": _best_seconds(iteration, states, grid_gains),
-        "real": _best_seconds(real, states, k_real),
-    }
-    after_real, episodes = real(states, k_real)
+    stage = lambda fn: jax.jit(jax.vmap(jax.vmap(fn)))
+    after_real, episodes = stage(trainer.real_stage)(states, k_real)
     flat = lambda w: w.reshape((-1, *w.shape[2:]))
     n_steps = config.agent.n_steps
     share, computed = _masked_share(flat(episodes.steps.weight), n_steps)
@@ -209,22 +233,15 @@ def stages(algo: str, runs: int = 30, warm_episodes: int = 400, env: str = "cart
         "real_steps_computed": computed,
     }
     if trainer.dynamics is not None:
-        model = per_run(trainer.model_stage, 0, 0)
-        imagine = per_run(trainer.imagine_stage, 0, 0)
-        seconds["model"] = _best_seconds(model, after_real, episodes, k_model)
-        after_model, _ = model(after_real, episodes, k_model)
-        seconds["imagine"] = _best_seconds(imagine, after_model, k_imagine, grid_gains)
-        _, imagined = imagine(after_model, k_imagine, grid_gains)
+        after_model, _ = stage(trainer.model_stage)(after_real, episodes, k_model)
+        grid_gains = jnp.broadcast_to(gains[:, None], states.env_steps.shape)
+        _, imagined = stage(trainer.imagine_stage)(after_model, k_imagine, grid_gains)
         share, computed = _masked_share(flat(imagined.steps.weight), n_steps)
         row["imagined_masked_share"] = round(share, 3)
         row["imagined_steps_computed"] = computed
         row["imagined_mean_episode_length"] = round(float(imagined.steps.weight.sum(2).mean()), 1)
-    staged = sum(v for name, v in seconds.items() if name != "iteration")
-    seconds["bookkeeping"] = max(seconds["iteration"] - staged, 0.0)
-    row["seconds_per_iteration"] = {name: round(v, 4) for name, v in seconds.items()}
-    row["share_of_iteration"] = {
-        name: round(v / seconds["iteration"], 3)
-        for name, v in seconds.items()
-        if name != "iteration"
-    }
+    row["seconds_up_to"] = {name: round(v, 4) for name, v in zip(names, upto, strict=True)}
+    row["seconds_up_to"]["iteration"] = round(whole, 4)
+    row["seconds_per_stage"] = {name: round(v, 4) for name, v in seconds.items()}
+    row["share_of_iteration"] = {name: round(v / whole, 3) for name, v in seconds.items()}
     return row

@@ -114,8 +114,9 @@ def _json(results: Path, name: str) -> dict:
 def test_smoke_trains_each_run_once_and_reuses_it(smoke):
     results, stdout = smoke
     # Table 2's three runs, Figure 9's two (CartPole and inverted_pendulum), the calibration's
-    # ensemble-LD run, Table 4's two and Table 5's three; the other scripts reuse them.
-    assert stdout.count("training ") == 11, stdout
+    # ensemble-LD run, Table 4's two, Table 5's three and the targets' a2c; the other scripts
+    # reuse them.
+    assert stdout.count("training ") == 12, stdout
     finished = sorted(p.name for p in (results / "runs" / "smoke").iterdir())
     assert finished == [
         "cartpole-v0-a2c",
@@ -123,6 +124,7 @@ def test_smoke_trains_each_run_once_and_reuses_it(smoke):
         "cartpole-v0-ldn",
         "cartpole-v0-ldn-ensemble",
         "cartpole-v0-ldn-k0.5,1,2",
+        "inverted_pendulum-a2c",
         "inverted_pendulum-a2c-model",
         "inverted_pendulum-ldn",
         "inverted_pendulum-ldn-k0.5,1,2",
@@ -213,6 +215,34 @@ def test_smoke_mujoco_tables_run_inverted_pendulum_and_list_the_rest(smoke):
         assert (results / name / f"{name}.png").stat().st_size > 1000
         with open(results / name / f"{name}.csv") as f:
             assert len(list(csv.DictReader(f))) == len(_json(results, name)["rows"])
+
+
+def test_smoke_targets_run_every_algorithm_on_inverted_pendulum(smoke):
+    results, _ = smoke
+    targets = _json(results, "targets")
+    done = [r for r in targets["rows"] if r["status"] == "done"]
+    assert [r["algo"] for r in done] == ["a2c", "a2c-model", "ldn", "ppo", "ppo-model", "ppo-ldn"]
+    assert {r["env"] for r in done} == {"inverted_pendulum"}
+    assert [(r["env"], r["status"]) for r in targets["rows"][6:]] == [
+        ("halfcheetah", "pending")
+    ] * 2
+    for row in done:
+        assert row["seeds"] == 2 and len(row["highest"]) == 2 and row["budget"] == "8 episodes"
+        assert row["met"] == (row["reached"] >= 4 and row["train_seconds"] < 900)
+    assert (results / "targets" / "targets.png").stat().st_size > 1000
+    text = (results / "REPORT.md").read_text()
+    assert "## MuJoCo at the default budgets" in text and "Targets, inverted_pendulum: " in text
+
+
+def test_default_budget_targets_are_the_users_commands():
+    from experiments.paper import targets
+
+    scale = report.common.SCALES["cpu"]
+    config = targets.run_config(scale, "halfcheetah", "ldn", 10, (0.5, 1.0, 2.0))
+    assert config.steps == 1_000_000 and config.seeds == 10 and config.k == (0.5, 1.0, 2.0)
+    assert targets.run_config(scale, "inverted_pendulum", "ppo", 5, (1.0,)).steps == 600_000
+    out = targets.run_dir(Path("r"), scale, config)
+    assert out == Path("r/runs/cpu/targets-halfcheetah-ldn-k0.5,1,2")
 
 
 def test_cpu_scale_runs_every_mujoco_task_on_its_budget():

@@ -3,7 +3,7 @@
     python experiments/paper/all.py [--scale cpu|paper] [--smoke] [--results DIR]
 
 The same as running table2.py, table3.py, figure4.py, figure5.py, figure9.py, calibration.py,
-table4.py, table5.py and report.py one after the other with the same flags; one process
+table4.py, table5.py, targets.py and report.py one after the other with the same flags; one process
 compiles each training program once.
 """
 
@@ -25,9 +25,10 @@ from experiments.paper import (
     table3,
     table4,
     table5,
+    targets,
 )
 
-SCRIPTS = (table2, table3, figure4, figure5, figure9, calibration, table4, table5, report)
+SCRIPTS = (table2, table3, figure4, figure5, figure9, calibration, table4, table5, targets, report)
 
 
 def main(argv: list[str] | None = None) -> int:

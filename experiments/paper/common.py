@@ -27,6 +27,7 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:  # run as `python experiments/paper/NAME.py`
     sys.path.insert(0, str(ROOT))
 
+import envs  # noqa: E402
 from experiments.training import train  # noqa: E402
 from ldn_jax.config import Config, from_preset, validate  # noqa: E402
 from ldn_jax.run_dir import RunDir  # noqa: E402
@@ -286,10 +287,18 @@ def _same_config(stored: dict, config: Config) -> bool:
     if not RunDir.same_format(stored):
         return False
     try:
-        plain = lambda c: json.loads(json.dumps(c.to_dict()))
+        plain = lambda c: _resolved(json.loads(json.dumps(c.to_dict())))
         return plain(Config.from_dict(stored)) == plain(config)
     except TypeError:  # a field this version does not know
         return False
+
+
+def _resolved(config: dict) -> dict:
+    """A MuJoCo config's `backend: auto` as the engine it picks here (the CLI records that
+    engine, a script's config says "auto": the same run)."""
+    if config.get("backend") == "auto" and config.get("env") in envs.mujoco.TASKS:
+        return {**config, "backend": envs.mujoco.resolve_backend("auto")}
+    return config
 
 
 def collect_runs(

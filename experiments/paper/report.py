@@ -20,7 +20,7 @@ from scipy import stats
 
 from experiments.paper import common
 
-NAMES = ("table2", "table3", "figure5", "figure9", "calibration", "table4", "table5")
+NAMES = ("table2", "table3", "figure5", "figure9", "calibration", "table4", "table5", "targets")
 
 
 def load(results: Path) -> dict[str, dict | None]:
@@ -789,6 +789,91 @@ def table5_finding(env: str, algos: dict[str, dict]) -> str:
     )
 
 
+def _span(values: list) -> str:
+    have = [v for v in values if v is not None]
+    return f"{min(have):,.0f}-{max(have):,.0f}" if have else "–"
+
+
+def targets_section(record: dict) -> Section:
+    intro = (
+        "What the defaults deliver (not a table of the paper): each run at its default budget "
+        "(`DEFAULT_STEPS`), as `python experiments/run.py --env ENV --algo ALGO --seeds N` "
+        "starts it. Curves: ![targets](targets/targets.png)"
+    )
+    rows = [r for r in record["rows"] if r["status"] == "done"]
+    pendulum = [r for r in rows if r["env"] == "inverted_pendulum"]
+    cheetah = [r for r in rows if r["env"] == "halfcheetah"]
+    parts: list = [intro]
+    findings = []
+    if pendulum:
+        header = ["algorithm", "budget", "seeds >= 900", "env steps to 900", "highest"]
+        header += ["final moving return", "greedy eval", "training s", "target met"]
+        parts.append(
+            Table(
+                header,
+                [
+                    [
+                        r["algo"],
+                        r["budget"],
+                        f"{r['reached']}/{r['seeds']}",
+                        _span(r["steps_to_level"]),
+                        _span(r["highest"]),
+                        _span(r["final_moving_return"]),
+                        _span(r["eval_return"]),
+                        f"{r['train_seconds']:.0f}",
+                        "yes" if r["met"] else "NO",
+                    ]
+                    for r in pendulum
+                ],
+            )
+        )
+        met = sum(r["met"] for r in pendulum)
+        findings.append(
+            f"Targets, inverted_pendulum: {met} of {len(pendulum)} algorithms reach a moving "
+            "return of 900 on at least 4 of 5 seeds within the default budget in under 15 "
+            "minutes of training ("
+            + ", ".join(f"{r['algo']} {r['reached']}/{r['seeds']}" for r in pendulum)
+            + ")."
+        )
+    if cheetah:
+        header = ["algorithm", "budget", "runs", "mean moving return: first -> final"]
+        header += ["final, per run", "greedy eval, mean", "wall s", "target", "met"]
+        target = {
+            "ldn": "rise >= 1,000 in under 30 min",
+            "ppo": "mean final >= 2,000",
+        }
+        table = []
+        for r in cheetah:
+            runs = len(r["final_moving_return"])
+            evals = sum(r["eval_return"]) / runs
+            table.append(
+                [
+                    r["algo"],
+                    r["budget"],
+                    f"{r['seeds']} seeds x {len(r['k'])} K" if len(r["k"]) > 1 else str(runs),
+                    f"{r['first_mean_moving_return']:,.0f} -> {r['final_mean_moving_return']:,.0f}",
+                    _span(r["final_moving_return"]),
+                    f"{evals:,.0f}",
+                    f"{r['wall_seconds']:.0f}",
+                    target.get(r["algo"], ""),
+                    "yes" if r["met"] else "NO",
+                ]
+            )
+            findings.append(
+                f"Targets, halfcheetah {r['algo']}: mean moving return "
+                f"{r['first_mean_moving_return']:,.0f} -> {r['final_mean_moving_return']:,.0f} "
+                f"over {runs} runs in {r['wall_seconds'] / 60:.0f} minutes "
+                f"({target.get(r['algo'], '')}: {'met' if r['met'] else 'NOT met'})."
+            )
+        parts.append(Table(header, table))
+    pending = [r for r in record["rows"] if r["status"] != "done"]
+    if pending:
+        parts.append(
+            "Pending at this scale: " + ", ".join(f"{r['env']} {r['algo']}" for r in pending) + "."
+        )
+    return Section(TITLES["targets"], parts, findings)
+
+
 SECTIONS = (
     ("table2", table2_section),
     ("table3", table3_section),
@@ -798,6 +883,7 @@ SECTIONS = (
     ("calibration", calibration_section),
     ("table4", table4_section),
     ("table5", table5_section),
+    ("targets", targets_section),
 )
 """The report's sections in order: result name -> builder of its `Section` from the result."""
 
@@ -810,6 +896,7 @@ TITLES = {
     "calibration": "LD calibration: does the learning degree know when the model is wrong?",
     "table4": "Table 4: MuJoCo, A3C-Model vs MBRL-LDN",
     "table5": "Table 5: MuJoCo, PPO2 vs PPO2-Model vs PPO2-LDN",
+    "targets": "MuJoCo at the default budgets: the project's targets",
 }
 """Every section's title."""
 

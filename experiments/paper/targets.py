@@ -1,0 +1,181 @@
+"""The MuJoCo targets at the default budgets: every algorithm on inverted_pendulum, the user's
+halfcheetah command, and PPO on halfcheetah.
+
+    python experiments/paper/targets.py [--scale cpu|paper] [--smoke] [--results DIR]
+
+Not a table of the paper: what a user gets from the defaults (`DEFAULT_STEPS`), checked
+against the targets the project set itself.
+- inverted_pendulum, each of the six algorithms, 5 seeds, K = 1: a moving return >= 900 on at
+  least 4 of 5 seeds within the default budget, in under 15 minutes of training.
+- halfcheetah, `--algo ldn --seeds 10` (10 seeds x K in {0.5, 1, 2}): under 30 minutes end to
+  end, and the mean moving return rises by at least 1,000 from the first iteration to the end.
+- halfcheetah, `--algo ppo`, 5 seeds: a mean final moving return >= 2,000 by 1M steps.
+At the smoke scale the runs take the scale's budgets instead (and halfcheetah is left
+pending). Writes targets.json and targets.png into DIR/targets/.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+
+import numpy as np
+
+from experiments.paper import common
+from ldn_jax.config import from_preset, validate
+from ldn_jax.metrics import threshold_crossing
+
+PENDULUM_ALGOS = ("a2c", "a2c-model", "ldn", "ppo", "ppo-model", "ppo-ldn")
+PENDULUM_LEVEL = 900.0
+PENDULUM_SEEDS = 4  # of 5
+PENDULUM_SECONDS = 15 * 60
+CHEETAH_RISE = 1000.0
+CHEETAH_SECONDS = 30 * 60
+CHEETAH_PPO = 2000.0
+
+RUNS = (
+    *(("inverted_pendulum", algo, 5, (1.0,)) for algo in PENDULUM_ALGOS),
+    ("halfcheetah", "ldn", 10, (0.5, 1.0, 2.0)),
+    ("halfcheetah", "ppo", 5, (1.0,)),
+)
+"""(env, algo, seeds, K) of each run, as a user would start it."""
+
+
+def run_config(scale: common.Scale, env: str, algo: str, seeds: int, k: tuple[float, ...]):
+    """The run at its default budget, or at the smoke scale's (None: not run there)."""
+    if scale.name != "smoke":
+        return validate(from_preset("paper", env=env, algo=algo, seeds=seeds, k=k))
+    if env not in scale.mujoco_budgets:
+        return None
+    return common.run_config(scale, env, algo)
+
+
+def run_dir(results: Path, scale: common.Scale, config) -> Path:
+    """Beside the tables' runs; at the default budgets under their own names, since the
+    tables' runs of the same env and algorithm have shorter budgets."""
+    out = common.run_dir(results, scale, config)
+    return out if scale.name == "smoke" else out.with_name("targets-" + out.name)
+
+
+def pendulum_row(entry: dict) -> dict:
+    history = common.load_history(entry["dir"])
+    summary = entry["summary"]
+    after = history["moving_after"][0]  # [S, N, W]: after each episode, in completion order
+    reach = []
+    for seed in range(after.shape[0]):
+        crossing = threshold_crossing(
+            after[seed], history["lengths"][0, seed], history["env_steps"][0, seed], PENDULUM_LEVEL
+        )
+        reach.append(None if crossing is None else crossing[1])
+    highest = np.nanmax(after.reshape(after.shape[0], -1), axis=-1)
+    reached = sum(r is not None for r in reach)
+    seconds = summary["train_seconds"]
+    return {
+        "env": entry["env"],
+        "algo": entry["algo"],
+        "status": "done",
+        "budget": common.budget_text(entry["config"]),
+        "seeds": len(reach),
+        "reached": reached,
+        "steps_to_level": reach,
+        "highest": [round(float(h), 1) for h in highest],
+        "final_moving_return": [r["final_moving_return"] for r in summary["runs"]],
+        "eval_return": [r["eval_return"] for r in summary["runs"]],
+        "train_seconds": seconds,
+        "compile_seconds": summary["compile_seconds"],
+        "met": reached >= PENDULUM_SEEDS and seconds < PENDULUM_SECONDS,
+    }
+
+
+def cheetah_row(entry: dict) -> dict:
+    history = common.load_history(entry["dir"])
+    summary = entry["summary"]
+    moving = history["moving_return"]  # [K, S, N]
+    mean = np.nanmean(moving.reshape(-1, moving.shape[-1]), axis=0)
+    finals = [r["final_moving_return"] for r in summary["runs"]]
+    wall = summary["train_seconds"] + summary["compile_seconds"] + summary["eval_seconds"]
+    row = {
+        "env": entry["env"],
+        "algo": entry["algo"],
+        "status": "done",
+        "budget": common.budget_text(entry["config"]),
+        "seeds": entry["config"].seeds,
+        "k": list(entry["config"].k),
+        "first_mean_moving_return": float(mean[0]),
+        "final_mean_moving_return": float(np.mean(finals)),
+        "final_moving_return": finals,
+        "eval_return": [r["eval_return"] for r in summary["runs"]],
+        "train_seconds": summary["train_seconds"],
+        "compile_seconds": summary["compile_seconds"],
+        "wall_seconds": wall,
+    }
+    if entry["algo"] == "ldn":
+        rise = row["final_mean_moving_return"] - row["first_mean_moving_return"]
+        row["met"] = rise >= CHEETAH_RISE and wall < CHEETAH_SECONDS
+    else:
+        row["met"] = row["final_mean_moving_return"] >= CHEETAH_PPO
+    return row
+
+
+def curves(entries: list[dict], path: Path) -> None:
+    """One panel per run: mean moving return and 95% band over its seeds (and K) against the
+    mean real env steps, with the target's level dashed."""
+    import matplotlib.pyplot as plt
+
+    from experiments.plots import band_panel
+
+    done = [e for e in entries if e["status"] == "done"]
+    if not done:
+        return
+    cols = 4
+    rows = -(-len(done) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.4 * rows), dpi=110, squeeze=False)
+    for ax, entry in zip(axes.flat, done, strict=False):
+        history = common.load_history(entry["dir"])
+        moving = history["moving_return"]
+        steps = history["env_steps"].reshape(-1, moving.shape[-1]).mean(axis=0)
+        label = common.PAPER_ALGOS.get(entry["algo"], entry["algo"])
+        level = PENDULUM_LEVEL if entry["env"] == "inverted_pendulum" else None
+        band_panel(
+            ax,
+            {label: (steps, moving.reshape(-1, moving.shape[-1]))},
+            f"{entry['env']} {entry['algo']}",
+            level,
+            "target",
+            legend_size=7,
+        )
+        ax.set_xlabel("real env steps (mean over seeds)")
+    for ax in list(axes.flat)[len(done) :]:
+        ax.axis("off")
+    fig.suptitle("MuJoCo at the default budgets", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    scale, results = common.parse_args(argv, __doc__)
+    entries, table = [], []
+    for env, algo, seeds, k in RUNS:
+        config = run_config(scale, env, algo, seeds, k)
+        if config is None:
+            table.append({"env": env, "algo": algo, "status": "pending"})
+            continue
+        out = run_dir(results, scale, config)
+        entry = {"env": env, "algo": algo, "status": "done", "dir": out, "config": config}
+        entry["summary"] = common.ensure_run(config, out)
+        entries.append(entry)
+        table.append(pendulum_row(entry) if env == "inverted_pendulum" else cheetah_row(entry))
+    out = common.out_dir(results, "targets")
+    record = {**common.scale_record(scale), "rows": table}
+    common.write_json(out / "targets.json", record)
+    curves(entries, out / "targets.png")
+    met = sum(bool(r.get("met")) for r in table)
+    print(f"wrote {out}/targets.json, targets.png ({met}/{len(table)} targets met)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
