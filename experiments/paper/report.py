@@ -789,9 +789,14 @@ def table5_finding(env: str, algos: dict[str, dict]) -> str:
     )
 
 
-def _span(values: list) -> str:
+def _span(values: list, digits: int = 0) -> str:
+    """ "low to high" of the values given, "all N" where they are equal."""
     have = [v for v in values if v is not None]
-    return f"{min(have):,.0f}-{max(have):,.0f}" if have else "–"
+    if not have:
+        return "–"
+    if min(have) == max(have):
+        return f"{have[0]:,.{digits}f} (all {len(have)})"
+    return f"{min(have):,.{digits}f} to {max(have):,.{digits}f}"
 
 
 def targets_section(record: dict) -> Section:
@@ -817,7 +822,7 @@ def targets_section(record: dict) -> Section:
                         r["budget"],
                         f"{r['reached']}/{r['seeds']}",
                         _span(r["steps_to_level"]),
-                        _span(r["highest"]),
+                        _span(r["highest"], 1),
                         _span(r["final_moving_return"]),
                         _span(r["eval_return"]),
                         f"{r['train_seconds']:.0f}",

@@ -123,6 +123,7 @@ def curves(entries: list[dict], path: Path) -> None:
     """One panel per run: mean moving return and 95% band over its seeds (and K) against the
     mean real env steps, with the target's level dashed."""
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter
 
     from experiments.plots import band_panel
 
@@ -147,6 +148,7 @@ def curves(entries: list[dict], path: Path) -> None:
             legend_size=7,
         )
         ax.set_xlabel("real env steps (mean over seeds)")
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1000:,.0f}k"))
     for ax in list(axes.flat)[len(done) :]:
         ax.axis("off")
     fig.suptitle("MuJoCo at the default budgets", fontsize=10)
