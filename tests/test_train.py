@@ -252,9 +252,10 @@ def test_support_box_is_the_buffers_and_episodes_that_leave_it_are_counted():
     np.testing.assert_array_equal(final.model.bounds[1][0, 1], seen.max(axis=0))
 
 
-@pytest.mark.parametrize("algo", ["ldn", "ppo-ldn"])
-def test_observation_statistics_count_every_real_step_and_no_imagined_one(algo):
-    trainer = Trainer(_config(algo=algo, agent={"normalize_obs": True}))
+def test_observation_statistics_count_every_real_step_and_no_imagined_one():
+    # ppo-ldn: its imagined steps go through the imaginary memory, its real ones through PPO
+    # updates per segment; A2C's updates share `play_episodes` and `ActorCritic.observe`.
+    trainer = Trainer(_config(algo="ppo-ldn", agent={"normalize_obs": True}))
     final, history = _run_chunks(trainer, trainer.init_batch())
     final = jax.device_get(final)
     stats = final.learner.params["obs_norm"]
