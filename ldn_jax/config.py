@@ -215,16 +215,18 @@ class Config:
         `TASK_MODEL`); an algorithm that does not use K keeps the first of the K values."""
         if name not in PRESETS:
             raise ValueError(f"unknown preset {name!r}; valid presets: {', '.join(PRESETS)}")
-        preset = PRESETS[name]
         algo = overrides.get("algo", Config.algo)
+        learner = ALGORITHMS[algo].learner if algo in ALGORITHMS else "a2c"
+        preset = {k: v for k, v in PRESETS[name].items() if k != "learners"}
+        preset |= PRESETS[name].get("learners", {}).get(learner, {})
         env = overrides.get("env", Config.env)
         if env in DEFAULT_STEPS and "episodes" not in overrides:
             overrides.setdefault("steps", DEFAULT_STEPS[env])
-        overrides.setdefault("episodes", DEFAULT_EPISODES.get(env, Config.episodes))
+        episodes = preset.get("episodes", DEFAULT_EPISODES.get(env, Config.episodes))
+        overrides.setdefault("episodes", episodes)
         overrides.setdefault("chunk_iterations", DEFAULT_CHUNK.get(env, Config.chunk_iterations))
         gains = tuple(overrides.get("k", Config.k))
         overrides["k"] = gains if ALGORITHMS.get(algo, ALGORITHMS["ldn"]).ld_stop else gains[:1]
-        learner = ALGORITHMS[algo].learner if algo in ALGORITHMS else "a2c"
         agent = dict(LEARNER_DEFAULTS[learner]["agent"])
         model = dict(LEARNER_DEFAULTS[learner].get("model", {}))
         if _continuous(env):
@@ -234,7 +236,7 @@ class Config:
         model.update(TASK_MODEL.get(env, {}))
         agent.update({**preset.get("agent", {}), **overrides.pop("agent", {})})
         model.update({**preset.get("model", {}), **overrides.pop("model", {})})
-        top = {key: v for key, v in preset.items() if key not in ("agent", "model")}
+        top = {key: v for key, v in preset.items() if key not in ("agent", "model", "episodes")}
         return cls(
             preset=name, **top, **overrides, agent=AgentConfig(**agent), model=ModelConfig(**model)
         )
@@ -416,7 +418,27 @@ PRESETS: dict[str, dict] = {
     "tutorial": {"agent": {"terminal_reward": -5.0}},
     # Nonlinear dynamics model predicting state deltas.
     "mlp-model": {"model": {"activation": "relu", "predict_delta": True}},
+    # Ours, for a solved CartPole rather than a paper replica (`FAST_CARTPOLE`); values by
+    # learner ("learners": learner -> preset entries).
+    "fast": {
+        "learners": {
+            "a2c": {
+                "agent": {"gamma": 0.99, "reward_scale": 0.1, "normalize_obs": True},
+                "episodes": 3000,
+            },
+            "ppo": {"episodes": 800},
+        }
+    },
 }
+FAST_CARTPOLE = "fast"
+"""The preset for users who want CartPole solved. The A2C family: gamma 0.99, a tenth of the
+reward and standardised observations, 3,000 episodes; the PPO family: its defaults, 800
+episodes. Measured on cartpole-v1, 10 seeds, greedy eval of 10 episodes (gymnasium-exact):
+a2c at the paper preset scores 135-486 after 800 episodes (1 of 10 seeds at 475); with gamma
+0.99 and reward scale 0.1, 5 of 10 after 1,200 episodes; with standardised observations too,
+5 of 10 after 1,200 and 10 of 10 after 3,000. ppo at its defaults: 10 of 10 after 800
+episodes; with the A2C values, 9 of 10 after 3,000 (README, the fast preset). For CartPole
+only: MuJoCo's defaults are already ours."""
 
 
 from_preset = Config.from_preset
@@ -438,6 +460,11 @@ def validate(config: Config) -> Config:
         raise ValueError(f"unknown algo {config.algo!r}; valid algos: {', '.join(ALGORITHMS)}")
     checks = [
         (config.seeds >= 1, f"seeds must be >= 1, got {config.seeds}"),
+        (
+            config.preset != FAST_CARTPOLE or not _continuous(config.env),
+            f"preset {FAST_CARTPOLE!r} is for CartPole (measured there); MuJoCo tasks have "
+            "their own defaults",
+        ),
         (len(config.k) >= 1, "k needs at least one value"),
         (
             all(k > 0 and math.isfinite(k) for k in config.k),

@@ -80,6 +80,7 @@ def test_load_policy_returns_python_ints(run_dir):
         (["--ld", "ensemble", "--ensemble-size", "1"], "ensemble size must be >= 2, got 1"),
         (["--ensemble-size", "3"], "--ensemble-size needs --ld ensemble"),
         (["--env", "hopper", "--backend", "warp"], "backend must be one of auto, native, mjx"),
+        (["--env", "halfcheetah", "--preset", "fast"], "preset 'fast' is for CartPole"),
     ],
 )
 def test_bad_input_exits_2_with_one_line(args, needle):
