@@ -2,12 +2,27 @@
 
 The config's defaults are `Config`'s (`ldn_jax.config`, per-env ones in `from_preset`): a
 config flag left out is None here, so that `--resume` can tell which flags were given.
+
+Every field of the config can be set, by its dotted name in `ldn_jax.config.fields()` (the
+table read off the dataclasses' annotations, so a new field is settable the day it is
+added): from a file (`--config FILE`, TOML or JSON, nested as config.json is), then the
+named flags (`CONFIG_FLAGS`: short names for the fields users set most), then
+`--set FIELD=VALUE`, each over the one before.
+
+    python experiments/run.py --config runs/X/config.json --set agent.actor_lr=3e-4
 """
 
 from __future__ import annotations
 
 import argparse
+import ast
 import dataclasses
+import difflib
+import inspect
+import json
+import re
+import textwrap
+import tomllib
 from pathlib import Path
 
 import envs
@@ -17,8 +32,12 @@ from ldn_jax.config import (
     IMAGINE_MODES,
     LD_ESTIMATORS,
     PRESETS,
+    SECTIONS,
     Config,
+    FieldType,
+    fields,
     from_preset,
+    get_field,
     validate,
 )
 
@@ -42,6 +61,8 @@ Train the A2C or PPO family (plain, -model, -ldn) on one env, many seeds and K a
 Writes config.json, metrics.jsonl, summary.json, curves.png and checkpoints/ into --out.
 `--devices N` splits the seeds over N devices, `--distributed` over several hosts;
 `--dry-run` compiles the training program and prints its cost without training.
+Any config field: `--set agent.actor_lr=3e-4` or `--config FILE` (a run's own config.json
+reruns it); `--list-fields` shows them all.
 """
 
 CONFIG_FLAGS = {
@@ -61,7 +82,8 @@ CONFIG_FLAGS = {
     "imagine": "model.imagine",
     "support": "model.support",
 }
-"""CLI flag (its argparse name) -> the config field it sets (`model.X`: a `ModelConfig` field)."""
+"""CLI flag (its argparse name) -> the config field it sets: short names for a few fields of
+`fields()` (`model.X`: a `ModelConfig` field); every field also takes `--set` and `--config`."""
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -121,6 +143,26 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "real ones, widened by FRACTION of its width each side; none: never (default: 0.1 "
         "for MuJoCo tasks, none for CartPole)",
     )
+    p.add_argument(
+        "--config",
+        metavar="FILE",
+        help="config fields from a TOML or JSON file, nested as config.json is (a run's own "
+        "config.json reruns it); the flags and --set override it",
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="FIELD=VALUE",
+        help="set any config field by its dotted name, e.g. agent.actor_lr=3e-4, "
+        "model.support=none, k=0.5,1 (repeatable; --list-fields names them all)",
+    )
+    p.add_argument(
+        "--list-fields",
+        action="store_true",
+        help="print every config field with its type and its value under the other flags "
+        "given, and exit",
+    )
     p.add_argument("--out", help="run directory (default runs/ENV-ALGO-TIME)")
     p.add_argument("--resume", metavar="DIR", help="continue the run in DIR from its checkpoint")
     p.add_argument(
@@ -174,28 +216,172 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 def build_config(args: argparse.Namespace) -> Config:
     """The config the flags describe (defaults for those not given), validated; a MuJoCo
     run's `auto` backend resolved. `UsageError` for anything impossible."""
-    if args.ensemble_size is not None and args.ld != "ensemble":
+    preset, settings = requested(args)
+    if args.ensemble_size is not None and settings.get("model.ld", (None,))[0] != "ensemble":
         raise UsageError("--ensemble-size needs --ld ensemble")
-    if args.steps is not None and args.episodes is not None:
-        raise UsageError("give --steps or --episodes, not both (one budget per run)")
     overrides: dict = {}
-    for flag, field in CONFIG_FLAGS.items():
-        value = getattr(args, flag)
-        if value is None or flag == "preset":
-            continue
-        if flag == "k":
-            value = parse_k(value)
-        if flag == "support":
-            value = parse_support(value)
-        if field.startswith("model."):
-            overrides.setdefault("model", {})[field.split(".", 1)[1]] = value
-        else:
-            overrides[field] = value
+    for name, (value, _) in settings.items():
+        section, _, sub = name.rpartition(".")
+        (overrides.setdefault(section, {}) if section else overrides)[sub] = value
     try:
-        config = validate(from_preset(args.preset or Config.preset, **overrides))
+        config = validate(from_preset(preset or Config.preset, **overrides))
     except ValueError as error:
         raise UsageError(str(error)) from None
     return resolve_physics(config)
+
+
+def requested(args: argparse.Namespace) -> tuple[str | None, dict[str, tuple[object, str]]]:
+    """What the command line asks for: the preset (None: not named) and the fields it sets,
+    `{dotted name: (value, where it was given)}`: the `--config` file's, then the named
+    flags', then `--set`'s, each over the one before."""
+    preset, settings = (None, {}) if args.config is None else read_config_file(args.config)
+    given: dict[str, tuple[object, str]] = {}
+    for flag, name in CONFIG_FLAGS.items():
+        text = getattr(args, flag)
+        if text is None or flag == "preset":
+            continue
+        value = {"k": parse_k, "support": parse_support}.get(flag, lambda v: v)(text)
+        given[name] = (value, f"{flag_name(flag)} {text}")
+    for item in args.set:
+        name, sep, text = item.partition("=")
+        name = name.strip()
+        if not sep:
+            raise UsageError(f"--set needs FIELD=VALUE, got {item!r}")
+        if name in given:
+            raise UsageError(f"--set {item}: {name} is already given by {given[name][1]}")
+        given[name] = (parse_value(name, text.strip(), f"--set {item}"), f"--set {item}")
+    if "steps" in given and "episodes" in given:
+        raise UsageError(
+            f"give {given['steps'][1]} or {given['episodes'][1]}, not both (one budget per run)"
+        )
+    if "episodes" in given and "steps" not in given:
+        settings.pop("steps", None)  # a budget in episodes replaces the file's in steps
+        given["steps"] = (None, given["episodes"][1])
+    return args.preset or preset, settings | given
+
+
+def read_config_file(path: str) -> tuple[str | None, dict[str, tuple[object, str]]]:
+    """`--config FILE`: its preset (None if it names none) and `{dotted name: (value,
+    where)}`. TOML or JSON, by the name's suffix; sections `agent` and `model` nest as in
+    config.json, whose `run_format` is not a setting and is skipped."""
+    file = Path(path)
+    try:
+        text = file.read_text()
+    except OSError as error:
+        raise UsageError(f"--config {path}: {error.strerror or error}") from None
+    try:
+        if file.suffix == ".toml":
+            data = tomllib.loads(text)
+        elif file.suffix == ".json":
+            data = json.loads(text)
+        else:
+            raise UsageError(f"--config {path}: expected a .toml or .json file")
+    except (tomllib.TOMLDecodeError, json.JSONDecodeError) as error:
+        raise UsageError(f"--config {path}: not valid {file.suffix[1:].upper()}: {error}") from None
+    if not isinstance(data, dict):
+        raise UsageError(f"--config {path}: expected a table of config fields")
+    data.pop("run_format", None)
+    preset = data.pop("preset", None)
+    if preset is not None and not isinstance(preset, str):
+        raise UsageError(f"--config {path}: preset must be a string, got {preset!r}")
+    flat = {}
+    for key, value in data.items():
+        if key in SECTIONS:
+            if not isinstance(value, dict):
+                raise UsageError(f"--config {path}: {key} must be a table of its fields")
+            flat |= {f"{key}.{sub}": v for sub, v in value.items()}
+        else:
+            flat[key] = value
+    where = f"--config {path}"
+    return preset, {name: (check_value(name, v, where), where) for name, v in flat.items()}
+
+
+def field_type(name: str, where: str) -> FieldType:
+    """The type of the config field `name`; UsageError naming the closest field if none."""
+    table = fields()
+    if name not in table:
+        close = difflib.get_close_matches(name, table, n=1)
+        hint = f"; did you mean {close[0]}?" if close else ""
+        raise UsageError(f"{where}: unknown config field {name!r}{hint} (--list-fields)")
+    return table[name]
+
+
+def parse_value(name: str, text: str, where: str):
+    """The command line's text for field `name` as a value of its type, or UsageError."""
+    kind = field_type(name, where)
+    if kind.optional and text.lower() in ("none", "null"):
+        return None
+    if kind.sequence:
+        return tuple(_scalar(kind, part.strip(), name, where) for part in text.split(","))
+    return _scalar(kind, text, name, where)
+
+
+def _scalar(kind: FieldType, text: str, name: str, where: str):
+    try:
+        if kind.base is bool:
+            return {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}[
+                text.lower()
+            ]
+        return kind.base(text)
+    except (KeyError, ValueError):
+        raise UsageError(f"{where}: {name} takes {kind.describe()}, got {text!r}") from None
+
+
+def check_value(name: str, value, where: str):
+    """A file's value for field `name`, checked against its type (an int is a float;
+    'none' is None where None is allowed), or UsageError."""
+    kind = field_type(name, where)
+    if kind.optional and (value is None or value == "none"):
+        return None
+    items = value if kind.sequence and isinstance(value, list) else [value]
+    ok = all(_is(kind.base, v) for v in items) and (isinstance(value, list) or not kind.sequence)
+    if not ok:
+        raise UsageError(f"{where}: {name} takes {kind.describe()}, got {value!r}")
+    cast = [kind.base(v) for v in items]
+    return tuple(cast) if kind.sequence else cast[0]
+
+
+def _is(base: type, value) -> bool:
+    """Whether a file's `value` is one of `base` (JSON and TOML: a bool is no number)."""
+    if isinstance(value, bool) or base is bool:
+        return isinstance(value, bool) and base is bool
+    accepted = {float: (int, float), int: int, str: str}[base]
+    return isinstance(value, accepted)
+
+
+def list_fields(config: Config) -> list[str]:
+    """`--list-fields`: one line per config field: its name, type, value in `config` (as
+    `--set` takes it) and the first sentence of its docstring."""
+    table, docs = fields(), field_docs()
+    width = max(map(len, table))
+    lines = [f"{'preset':<{width}}  {'str':<24}  {config.preset:<12}  one of: {', '.join(PRESETS)}"]
+    for name, kind in table.items():
+        value = _as_text(get_field(config, name))
+        lines.append(f"{name:<{width}}  {kind.describe():<24}  {value:<12}  {docs.get(name, '')}")
+    return lines
+
+
+def _as_text(value) -> str:
+    if value is None:
+        return "none"
+    if isinstance(value, tuple):
+        return ",".join(f"{v:g}" for v in value)
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def field_docs() -> dict[str, str]:
+    """The first sentence of each config field's docstring (the string below it in
+    `ldn_jax.config`), by dotted name."""
+    docs = {}
+    for prefix, cls in [("", Config), *((f"{n}.", c) for n, c in SECTIONS.items())]:
+        body = ast.parse(textwrap.dedent(inspect.getsource(cls))).body[0].body
+        for node, after in zip(body, body[1:], strict=False):
+            if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
+                text = getattr(after, "value", None)
+                if isinstance(text, ast.Constant) and isinstance(text.value, str):
+                    first = re.split(r"\.\s+(?=[A-Z])", " ".join(text.value.split()))[0]
+                    docs[prefix + node.target.id] = first.rstrip(".") + "."
+    return docs
 
 
 def resolve_physics(config: Config) -> Config:
@@ -212,27 +398,28 @@ def resolve_physics(config: Config) -> Config:
 
 
 def check_resume_flags(args: argparse.Namespace, config: Config) -> None:
-    """Flags given with `--resume` must agree with the stored config."""
-    for flag, field in CONFIG_FLAGS.items():
-        value = getattr(args, flag)
-        if value is None:
-            continue
-        stored = config
-        for part in field.split("."):
-            stored = getattr(stored, part)
-        if flag == "backend" and value == "auto" and config.env in envs.mujoco.TASKS:
+    """Settings given with `--resume` (flags, `--set`, `--config`) must agree with the stored
+    config."""
+    preset, settings = requested(args)
+    if preset is not None and preset != config.preset:
+        raise UsageError(
+            f"preset {preset} does not match the run being resumed (preset = {config.preset}); "
+            "drop it to resume"
+        )
+    for name, (value, where) in settings.items():
+        stored = get_field(config, name)
+        if name == "backend" and value == "auto" and config.env in envs.mujoco.TASKS:
             value = envs.mujoco.resolve_backend(value)
-        if flag == "support":
-            value = parse_support(value)
-        if flag == "k":
-            value = parse_k(value)
-            stored = tuple(stored)
+        if name == "k":
+            value, stored = tuple(value), tuple(stored)
             if not config.uses_k:
                 value = value[:1]
+        if name == "steps" and value is None and "episodes" in where:
+            continue  # `--episodes N` clears steps; episodes itself is compared
         if value != stored:
             raise UsageError(
-                f"{flag_name(flag)} {getattr(args, flag)} does not match the run being resumed "
-                f"({field} = {stored}); drop the flag to resume"
+                f"{where} does not match the run being resumed ({name} = {stored}); "
+                "drop it to resume"
             )
     if args.out is not None and Path(args.out).resolve() != Path(args.resume).resolve():
         raise UsageError("--out and --resume name different directories; give --resume alone")

@@ -49,6 +49,9 @@ def main(argv: list[str] | None = None) -> int:
             flags.check_resume_flags(args, config)
         else:
             config = flags.build_config(args)
+        if args.list_fields:
+            print("\n".join(flags.list_fields(config)))
+            return 0
         mesh = runtime.device_mesh(args, config.seeds)
         if args.dry_run:
             runtime.dry_run(config, mesh, cache, bool(args.bitwise))

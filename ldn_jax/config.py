@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import types
+import typing
 from dataclasses import dataclass, field
 
 import envs
@@ -443,6 +445,60 @@ only: MuJoCo's defaults are already ours."""
 
 from_preset = Config.from_preset
 """`Config.from_preset`, the name callers import."""
+
+SECTIONS = {"agent": AgentConfig, "model": ModelConfig}
+"""`Config`'s nested parts: their fields are named `agent.X` and `model.X`."""
+
+
+@dataclass(frozen=True)
+class FieldType:
+    """What values one config field takes, read off its annotation."""
+
+    base: type
+    """float, int, str or bool; for a tuple field, the type of its items."""
+    optional: bool = False
+    """None is a value (`float | None`)."""
+    sequence: bool = False
+    """A tuple of `base` (`tuple[float, ...]`)."""
+
+    def describe(self) -> str:
+        text = f"{self.base.__name__}s, comma-separated" if self.sequence else self.base.__name__
+        return text + (" or none" if self.optional else "")
+
+
+def fields() -> dict[str, FieldType]:
+    """Every setting of a run by its dotted name (`seeds`, `agent.actor_lr`, `model.lr`), in
+    declaration order, read off the dataclasses' annotations: the one table `--set`,
+    `--config` and the CLI's own flags resolve names against. `preset` is not a setting
+    (it names where the defaults came from)."""
+    table = {}
+    for name, hint in typing.get_type_hints(Config).items():
+        if name in SECTIONS:
+            for sub, sub_hint in typing.get_type_hints(SECTIONS[name]).items():
+                table[f"{name}.{sub}"] = _field_type(sub_hint)
+        elif name != "preset":
+            table[name] = _field_type(hint)
+    return table
+
+
+def _field_type(hint) -> FieldType:
+    args = typing.get_args(hint)
+    if isinstance(hint, types.UnionType) or typing.get_origin(hint) is typing.Union:
+        (inner,) = [a for a in args if a is not type(None)]
+        return dataclasses.replace(_field_type(inner), optional=True)
+    if typing.get_origin(hint) is tuple:
+        return FieldType(args[0], sequence=True)
+    if hint not in (float, int, str, bool):
+        raise TypeError(f"config field of unsupported type {hint!r}")
+    return FieldType(hint)
+
+
+def get_field(config: Config, name: str):
+    """The value of the dotted field `name` (`agent.actor_lr`) in `config`."""
+    value = config
+    for part in name.split("."):
+        value = getattr(value, part)
+    return value
 
 
 def _continuous(env: str) -> bool:

@@ -171,3 +171,17 @@ def test_a_held_run_directory_is_refused_and_a_killed_holder_leaves_no_lock(run_
     holder.wait()
     with run_dirs.hold(fresh):  # the lock died with its process
         pass
+
+
+def test_config_json_of_a_run_reruns_it(run_dir, tmp_path):
+    out = tmp_path / "again"
+    result = _run("--config", str(run_dir / "config.json"), "--out", str(out), "--quiet")
+    assert result.returncode == 0, result.stderr
+    read = lambda d: [
+        {k: v for k, v in json.loads(line).items() if k != "wall_seconds"}
+        for line in (d / "metrics.jsonl").read_text().splitlines()
+    ]
+    assert read(out) == read(run_dir)
+    assert json.loads((out / "config.json").read_text()) == json.loads(
+        (run_dir / "config.json").read_text()
+    )

@@ -1,0 +1,189 @@
+"""Every config field from the command line: `--set`, `--config FILE`, `--list-fields`."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from experiments import flags
+from experiments.flags import UsageError
+from ldn_jax.config import Config, fields, from_preset, get_field
+
+ROOT = Path(__file__).resolve().parents[1]
+RUN = [sys.executable, str(ROOT / "experiments" / "run.py")]
+
+
+def build(*argv: str) -> Config:
+    return flags.build_config(flags.parse_args(list(argv)))
+
+
+def refused(*argv: str) -> str:
+    with pytest.raises(UsageError) as error:
+        build(*argv)
+    message = str(error.value)
+    assert "\n" not in message
+    return message
+
+
+def test_the_field_table_is_read_off_the_dataclasses():
+    table = fields()
+    assert "preset" not in table and "agent" not in table and "model" not in table
+    assert table["agent.actor_lr"].base is float and table["seeds"].base is int
+    assert table["agent.normalize_obs"].base is bool and table["model.ld"].base is str
+    assert table["steps"].optional and table["model.support"].optional
+    assert table["k"].sequence and table["k"].base is float
+    # every field the dataclasses declare, nothing else
+    import dataclasses
+
+    from ldn_jax.config import AgentConfig, ModelConfig
+
+    declared = {f.name for f in dataclasses.fields(Config)} - {"preset", "agent", "model"}
+    declared |= {f"agent.{f.name}" for f in dataclasses.fields(AgentConfig)}
+    declared |= {f"model.{f.name}" for f in dataclasses.fields(ModelConfig)}
+    assert set(table) == declared
+    # the named flags are short names for fields of the table
+    assert set(flags.CONFIG_FLAGS.values()) - {"preset"} <= set(table)
+
+
+@pytest.mark.parametrize(
+    ("setting", "name", "value"),
+    [
+        ("agent.actor_lr=3e-4", "agent.actor_lr", 3e-4),
+        ("agent.n_steps=20", "agent.n_steps", 20),
+        ("agent.normalize_obs=true", "agent.normalize_obs", True),
+        ("agent.terminal_reward=none", "agent.terminal_reward", None),
+        ("agent.terminal_reward=-5", "agent.terminal_reward", -5.0),
+        ("model.activation=relu", "model.activation", "relu"),
+        ("model.lr=0.01", "model.lr", 0.01),
+        ("k=0.5,2", "k", (0.5, 2.0)),
+        ("threshold=120", "threshold", 120.0),
+        ("moving_decay=0.9", "moving_decay", 0.9),
+    ],
+)
+def test_set_reaches_every_kind_of_field(setting, name, value):
+    config = build("--set", setting)
+    assert get_field(config, name) == value
+    assert type(get_field(config, name)) is type(value)
+
+
+def test_set_over_the_presets_and_per_learner_defaults():
+    config = build("--algo", "ppo", "--set", "agent.epochs=2")
+    assert config.agent.epochs == 2 and config.agent.n_steps == 100  # PPO's other defaults
+    config = build("--env", "hopper", "--set", "model.support=none")
+    assert config.model.support is None and config.model.normalize  # MuJoCo's model defaults
+    config = build("--preset", "tutorial", "--set", "agent.gamma=0.95")
+    assert config.agent.gamma == 0.95 and config.agent.terminal_reward == -5.0
+
+
+@pytest.mark.parametrize(
+    ("argv", "needle"),
+    [
+        (["--set", "agent.actor_lrr=3e-4"], "unknown config field 'agent.actor_lrr'; did you mean"),
+        (["--set", "agent.actor_lr=fast"], "agent.actor_lr takes float, got 'fast'"),
+        (["--set", "seeds=1.5"], "seeds takes int, got '1.5'"),
+        (["--set", "agent.normalize_obs=maybe"], "agent.normalize_obs takes bool"),
+        (["--set", "agent.gamma=none"], "agent.gamma takes float, got 'none'"),
+        (["--set", "agent.gamma=2"], "gamma must be in (0, 1], got 2.0"),
+        (["--set", "model.lr=-1"], "model lr must be > 0"),
+        (["--set", "actor_lr"], "--set needs FIELD=VALUE"),
+        (["--k", "1", "--set", "k=2"], "k is already given by --k 1"),
+        (["--steps", "100", "--set", "episodes=3"], "not both (one budget per run)"),
+    ],
+)
+def test_bad_settings_are_one_line(argv, needle):
+    assert needle in refused(*argv)
+
+
+def test_config_files_in_toml_and_json(tmp_path):
+    toml = tmp_path / "ppo.toml"
+    toml.write_text('env = "cartpole-v1"\nalgo = "ppo"\n[agent]\nactor_lr = 1e-4\nepochs = 3\n')
+    config = build("--config", str(toml))
+    assert (config.env, config.algo, config.agent.actor_lr, config.agent.epochs) == (
+        "cartpole-v1",
+        "ppo",
+        1e-4,
+        3,
+    )
+    assert config.agent.n_steps == 100  # not in the file: PPO's default
+    # flags and then --set override the file
+    config = build("--config", str(toml), "--env", "cartpole-v0", "--set", "agent.epochs=7")
+    assert (config.env, config.agent.epochs, config.agent.actor_lr) == ("cartpole-v0", 7, 1e-4)
+    as_json = tmp_path / "c.json"
+    as_json.write_text(json.dumps({"k": [1, 2], "threshold": 3, "model": {"support": "none"}}))
+    config = build("--config", str(as_json))
+    assert config.k == (1.0, 2.0) and config.threshold == 3.0 and config.model.support is None
+
+
+@pytest.mark.parametrize(
+    ("text", "suffix", "needle"),
+    [
+        ('[agent]\nactor_lr = "x"\n', ".toml", "agent.actor_lr takes float, got 'x'"),
+        ("[agent\n", ".toml", "not valid TOML"),
+        ('{"seeds": true}', ".json", "seeds takes int, got True"),
+        ('{"agent": {"gamma": 3}}', ".json", "gamma must be in (0, 1]"),
+        ('{"agent": 3}', ".json", "agent must be a table of its fields"),
+        ('{"model": {"lrr": 1}}', ".json", "unknown config field 'model.lrr'"),
+        ("seeds: 3", ".yaml", "expected a .toml or .json file"),
+    ],
+)
+def test_bad_config_files_are_one_line(tmp_path, text, suffix, needle):
+    path = tmp_path / f"c{suffix}"
+    path.write_text(text)
+    assert needle in refused("--config", str(path))
+    assert "No such file" in refused("--config", str(tmp_path / "missing.toml"))
+
+
+def test_a_runs_own_config_json_gives_back_its_config(tmp_path):
+    for argv in (
+        ["--env", "halfcheetah", "--algo", "ppo"],
+        ["--algo", "a2c", "--preset", "fast", "--env", "cartpole-v1"],
+        ["--algo", "ldn", "--k", "0.5,2", "--set", "model.lr=0.003"],
+    ):
+        config = build(*argv)
+        path = tmp_path / "config.json"
+        path.write_text(json.dumps({**config.to_dict(), "run_format": 1}))
+        assert build("--config", str(path)) == config
+    # a budget in episodes replaces the file's budget in steps
+    config = build("--config", str(tmp_path / "config.json"), "--episodes", "40")
+    assert config.episodes == 40 and config.steps is None
+
+
+def test_resume_refuses_settings_that_differ(tmp_path):
+    stored = from_preset("paper", algo="ldn", seeds=2)
+    check = lambda *argv: flags.check_resume_flags(
+        flags.parse_args(["--resume", str(tmp_path), *argv]), stored
+    )
+    check("--set", "agent.gamma=0.9", "--set", "seeds=2")  # equal: fine
+    with pytest.raises(UsageError, match=r"--set agent.gamma=0.99 does not match.*gamma = 0.9"):
+        check("--set", "agent.gamma=0.99")
+    path = tmp_path / "config.json"
+    path.write_text(json.dumps(stored.to_dict()))
+    check("--config", str(path))
+    path.write_text(json.dumps({"model": {"lr": 0.5}}))
+    with pytest.raises(UsageError, match="model.lr = 0.001"):
+        check("--config", str(path))
+
+
+def test_list_fields_prints_every_field_with_its_value():
+    result = subprocess.run(
+        [*RUN, "--env", "halfcheetah", "--algo", "ppo", "--list-fields"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert result.returncode == 0, result.stderr
+    rows = {line.split()[0]: line.split()[1:] for line in result.stdout.splitlines()}
+    assert set(rows) == {"preset", *fields()}
+    assert rows["agent.reward_scale"][:2] == ["float", "0.1"]  # halfcheetah's PPO default
+    assert rows["steps"][:4] == ["int", "or", "none", "1000000"]
+    assert "Discount factor." in " ".join(rows["agent.gamma"])
+
+
+def test_a_bad_setting_exits_2_with_one_line_from_the_command():
+    result = subprocess.run(
+        [*RUN, "--set", "agent.gama=0.99"], capture_output=True, text=True, timeout=120
+    )
+    assert result.returncode == 2 and result.stderr.count("\n") == 1, result.stderr
+    assert "did you mean agent.gamma?" in result.stderr
