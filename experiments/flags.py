@@ -19,6 +19,7 @@ import ast
 import dataclasses
 import difflib
 import inspect
+import itertools
 import json
 import re
 import textwrap
@@ -375,7 +376,7 @@ def field_docs() -> dict[str, str]:
     docs = {}
     for prefix, cls in [("", Config), *((f"{n}.", c) for n, c in SECTIONS.items())]:
         body = ast.parse(textwrap.dedent(inspect.getsource(cls))).body[0].body
-        for node, after in zip(body, body[1:], strict=False):
+        for node, after in itertools.pairwise(body):
             if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
                 text = getattr(after, "value", None)
                 if isinstance(text, ast.Constant) and isinstance(text.value, str):

@@ -162,7 +162,7 @@ def test_resume_refuses_settings_that_differ(tmp_path):
     path.write_text(json.dumps(stored.to_dict()))
     check("--config", str(path))
     path.write_text(json.dumps({"model": {"lr": 0.5}}))
-    with pytest.raises(UsageError, match="model.lr = 0.001"):
+    with pytest.raises(UsageError, match=r"model\.lr = 0\.001"):
         check("--config", str(path))
 
 
