@@ -3,6 +3,7 @@
     ldn-jax --env cartpole-v2 --algo ldn --seeds 5 --k 0.5,1,2   (train: experiments/run.py)
     ldn-jax eval RUN_DIR [--seed S] [--k K] [--episodes N] [--video DIR]
     ldn-jax plot RUN_DIR [RUN_DIR ...] [--out PNG]
+    ldn-jax compare RUN_DIR [RUN_DIR ...] [--json FILE]
 
 Bad input gets a one-line error on stderr and exit code 2.
 """
@@ -10,12 +11,14 @@ Bad input gets a one-line error on stderr and exit code 2.
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
 import gymnasium
 import numpy as np
 
+from experiments import compare as comparison
 from experiments import gym_eval, run
 from experiments.flags import Parser, UsageError
 from experiments.plots import compare_runs
@@ -26,7 +29,7 @@ from ldn_jax.run_dir import RunDir, RunDirError
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the `ldn-jax` console script; returns the exit code."""
     argv = sys.argv[1:] if argv is None else list(argv)
-    commands = {"train": run.main, "eval": evaluate, "plot": plot}
+    commands = {"train": run.main, "eval": evaluate, "plot": plot, "compare": compare}
     if argv and argv[0] in commands:
         return commands[argv[0]](argv[1:])
     if argv and argv[0] in ("-h", "--help"):
@@ -124,6 +127,29 @@ def plot(argv: list[str]) -> int:
         print(f"error: cannot write {args.out}: {error.strerror or error}", file=sys.stderr)
         return 2
     print(f"comparison: {args.out}")
+    return 0
+
+
+def compare(argv: list[str]) -> int:
+    """`ldn-jax compare`: runs side by side: IQM over seeds with bootstrap 95% intervals of
+    episodes and env steps to threshold, final moving return and greedy eval return, and
+    each run's probability of improvement over the first run on its env."""
+    p = Parser(prog="ldn-jax compare", description=compare.__doc__)
+    p.add_argument("run_dirs", type=Path, nargs="+", metavar="RUN_DIR")
+    p.add_argument("--json", type=Path, default=None, help="also write the tables here")
+    try:
+        args = p.parse_args(argv)
+        table = comparison.rows(args.run_dirs)
+        better = comparison.improvements(table)
+        if args.json is not None:
+            args.json.write_text(json.dumps({"runs": table, "improvement": better}, indent=1))
+    except (UsageError, ValueError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    except OSError as error:
+        print(f"error: cannot write {args.json}: {error.strerror or error}", file=sys.stderr)
+        return 2
+    print("\n".join(comparison.render(table, better)))
     return 0
 
 

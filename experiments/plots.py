@@ -10,6 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from experiments import stats
 from ldn_jax.config import Config
 from ldn_jax.metrics import mean_band
 from ldn_jax.run_dir import RunDir
@@ -91,11 +92,15 @@ def run_curves(run_dir: Path, name: str) -> tuple[dict[str, tuple[np.ndarray, np
 
 
 def compare_runs(run_dirs: list[Path], path: Path) -> None:
-    """Overlay runs in one figure (see `learning_curves`); raises ValueError for a bad run."""
+    """Overlay runs in one figure (see `learning_curves`), each labelled with the IQM over
+    seeds of its last moving return and the bootstrap 95% interval; raises ValueError for a
+    bad run."""
     curves, configs = {}, []
     for run_dir in run_dirs:
         run, config = run_curves(run_dir, str(run_dir))
-        curves.update(run)
+        for name, (episodes, returns) in run.items():
+            final = stats.text(stats.estimate(returns[:, -1]))
+            curves[f"{name}, last IQM {final}"] = (episodes, returns)
         configs.append(config)
     thresholds = {config.resolved_threshold for config in configs}
     title = " / ".join(dict.fromkeys(config.env for config in configs))

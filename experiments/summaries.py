@@ -8,6 +8,7 @@ import sys
 
 import numpy as np
 
+from experiments import stats
 from experiments.plots import learning_curves
 from ldn_jax import sharding
 from ldn_jax.config import Config
@@ -133,6 +134,7 @@ def summarize(config: Config, history: dict, eval_returns, states, session: dict
         "env": config.env,
         "algo": config.algo,
         "backend": config.backend,
+        "statistics": statistics(config, runs),
         "budget": {"steps": config.steps} if config.steps else {"episodes": config.episodes},
         "real_episodes": int(history["episodes"][..., -1].sum()),
         "env_steps": total_steps,
@@ -144,6 +146,31 @@ def summarize(config: Config, history: dict, eval_returns, states, session: dict
         "resumes": session["resumes"],
         "runs": runs,
     }
+
+
+STATISTICS = (
+    "episodes_to_threshold",
+    "env_steps_to_threshold",
+    "final_moving_return",
+    "eval_return",
+)
+"""The per-run results `statistics` summarises over seeds."""
+
+
+def statistics(config: Config, runs: list[dict]) -> list[dict]:
+    """Per K, each of `STATISTICS` over the seeds: the interquartile mean with its bootstrap
+    95% interval, beside mean and s.d. (`experiments.stats.estimate`). To-threshold counts
+    are over the runs that reached it (`reached` of `runs`)."""
+    out = []
+    for k in config.k:
+        here = [r for r in runs if r["k"] == k]
+        entry = {"k": k, "runs": len(here)}
+        entry["reached"] = sum(r["episodes_to_threshold"] is not None for r in here)
+        for name in STATISTICS:
+            values = [r[name] for r in here if r[name] is not None]
+            entry[name] = stats.estimate(values)
+        out.append(entry)
+    return out
 
 
 def plot_curves(config: Config, history: dict, run: RunDir) -> None:
@@ -167,13 +194,20 @@ def closing_lines(config: Config, summary: dict, run: RunDir) -> None:
     if summary["threshold"] is not None:
         reached = [r for r in runs if r["episodes_to_threshold"] is not None]
         outcome = f"{len(reached)}/{len(runs)} runs reached {summary['threshold']}"
+        if len(reached) > 1:
+            iqms = [
+                stats.text(s["episodes_to_threshold"])
+                + (f" (K={s['k']:g})" if len(summary["statistics"]) > 1 else "")
+                for s in summary["statistics"]
+            ]
+            outcome += f", episodes to it: IQM [95% CI] {'; '.join(iqms)}"
     else:  # no threshold to reach: what the runs ended at
         final = [r["final_moving_return"] for r in runs if r["final_moving_return"] is not None]
-        final_text = f"{np.mean(final):,.1f}" if final else "none finite"
-        evals = np.mean([r["eval_return"] for r in runs])
+        final_text = stats.text(stats.estimate(final), 1) if final else "none finite"
+        evals = stats.text(stats.estimate([r["eval_return"] for r in runs]), 1)
         outcome = (
-            f"final moving return {final_text}, greedy eval return {evals:,.1f} "
-            f"(means over {len(runs)} runs)"
+            f"final moving return {final_text}, greedy eval return {evals} "
+            f"(IQM [95% CI] over {len(runs)} runs)"
         )
     print(
         f"{config.env} {config.algo}: {outcome}; compile {summary['compile_seconds']:.1f}s, "

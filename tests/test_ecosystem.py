@@ -223,3 +223,44 @@ def test_bad_input_from_the_shell_has_no_traceback(tmp_path):
     result = ldn_jax("eval", str(tmp_path / "missing"), cwd=tmp_path, timeout=120)
     assert result.returncode == 2 and result.stderr.startswith("error: no such run directory")
     assert result.stderr.count("\n") == 1 and "Traceback" not in result.stderr
+
+
+def test_compare_prints_iqm_and_the_probability_of_improvement(ldn_run, a2c_run, tmp_path):
+    from experiments import stats
+
+    out = tmp_path / "compare.json"
+    result = ldn_jax("compare", str(ldn_run), str(a2c_run), "--json", str(out), cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    data = json.loads(out.read_text())
+    assert [row["run"] for row in data["runs"]] == ["ldn", "a2c"]
+    for row, run_dir in zip(data["runs"], (ldn_run, a2c_run), strict=True):
+        summary = json.loads((run_dir / "summary.json").read_text())
+        finals = [r["final_moving_return"] for r in summary["runs"]]
+        assert row["final_moving_return"]["values"] == finals
+        assert row["final_moving_return"]["iqm"] == pytest.approx(stats.iqm(np.array(finals)))
+        # summary.json carries the same statistics
+        (entry,) = summary["statistics"]
+        assert entry["final_moving_return"]["iqm"] == row["final_moving_return"]["iqm"]
+    (better,) = data["improvement"]
+    assert (better["run"], better["baseline"]) == ("a2c", "ldn")
+    expected = stats.improvement(
+        data["runs"][1]["eval_return"]["values"], data["runs"][0]["eval_return"]["values"]
+    )
+    assert better["eval_return"] == expected
+    assert "| ldn (ldn K=1) | cartpole-v1 |" in result.stdout
+    assert "Probability that a seed of the run beats" in result.stdout
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["compare", "{tmp}/missing"], "no such run directory"),
+        (["compare", "{tmp}"], "no config.json"),
+        (["compare"], "required: RUN_DIR"),
+    ],
+)
+def test_compare_bad_input_exits_2_with_one_line(args, needle, tmp_path, capsys):
+    argv = [a.format(tmp=tmp_path) for a in args]
+    assert entry_point()(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and needle in err, err

@@ -1,0 +1,118 @@
+"""`ldn-jax compare`: runs side by side, as the field reports them since Agarwal et al. 2021:
+per run (and K) the interquartile mean over seeds with its bootstrap 95% interval of
+episodes and env steps to threshold, final moving return and greedy eval return, and the
+probability that a seed of each run beats a seed of the first run.
+
+    ldn-jax compare runs/a2c runs/ldn [--json FILE]
+
+Reads each run's summary.json (the per-seed results), nothing else; numpy in, plain data out.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from experiments import stats
+from ldn_jax.run_dir import RunDir, RunDirError
+
+METRICS = {
+    "episodes_to_threshold": ("episodes to threshold", True),
+    "env_steps_to_threshold": ("env steps to threshold", True),
+    "final_moving_return": ("final moving return", False),
+    "eval_return": ("greedy eval return", False),
+}
+"""summary.json's per-seed result -> (its heading, lower is better)."""
+
+
+def rows(run_dirs: list[Path]) -> list[dict]:
+    """One row per run and K: its name (the directory's, or its path where two share a
+    name), env, algo, K, seeds, how many reached the threshold, and per metric the per-seed
+    values and `stats.estimate` of them."""
+    out = []
+    names = [d.name for d in run_dirs]
+    for run_dir in run_dirs:
+        if not run_dir.is_dir():
+            raise ValueError(f"no such run directory: {run_dir}")
+        run = RunDir(run_dir)
+        config = run.read_config()  # RunDirError (a ValueError) names what is wrong
+        try:
+            summary = run.read_summary()
+        except FileNotFoundError:
+            raise ValueError(f"{run_dir} has no summary.json (training not finished?)") from None
+        except ValueError as error:
+            raise RunDirError(f"{run_dir}: unreadable summary.json ({error})") from None
+        for k in config.k:
+            seeds = [r for r in summary["runs"] if r["k"] == k]
+            row = {
+                "run": run_dir.name if names.count(run_dir.name) == 1 else str(run_dir),
+                "env": config.env,
+                "algo": config.algo,
+                "k": k if config.uses_k else None,
+                "seeds": len(seeds),
+                "threshold": summary.get("threshold"),
+                "reached": sum(r["episodes_to_threshold"] is not None for r in seeds),
+            }
+            for name in METRICS:
+                values = [r[name] for r in seeds if r.get(name) is not None]
+                row[name] = {"values": values, **stats.estimate(values)}
+            out.append(row)
+    return out
+
+
+def improvements(table: list[dict]) -> list[dict]:
+    """Per row after the first on the same env: the probability of improvement over the
+    first row of that env on each metric (lower counts as better for the to-threshold
+    ones), with its bootstrap interval."""
+    out = []
+    for row in table:
+        base = next(r for r in table if r["env"] == row["env"])
+        if base is row:
+            continue
+        entry = {"run": row["run"], "k": row["k"], "baseline": base["run"], "baseline_k": base["k"]}
+        for name, (_, lower) in METRICS.items():
+            entry[name] = stats.improvement(
+                row[name]["values"], base[name]["values"], lower_is_better=lower
+            )
+        out.append(entry)
+    return out
+
+
+def label(row: dict) -> str:
+    k = f" K={row['k']:g}" if row["k"] is not None else ""
+    return f"{row['run']} ({row['algo']}{k})"
+
+
+def render(table: list[dict], better: list[dict]) -> list[str]:
+    """The comparison as markdown tables (fit for a terminal and for notes); a metric no
+    run has (no threshold on MuJoCo) is left out."""
+    shown = [name for name in METRICS if any(row[name]["n"] for row in table)]
+    header = ["run", "env", "seeds", "reached", *(METRICS[name][0] for name in shown)]
+    lines = [
+        "IQM over seeds [bootstrap 95% interval]; to-threshold columns over the seeds "
+        "that reached it.",
+        "",
+        "| " + " | ".join(header) + " |",
+        "|" + "---|" * len(header),
+    ]
+    for row in table:
+        cells = [label(row), row["env"], str(row["seeds"]), f"{row['reached']}/{row['seeds']}"]
+        cells += [stats.text(row[name]) for name in shown]
+        lines.append("| " + " | ".join(cells) + " |")
+    if better:
+        lines += [
+            "",
+            "Probability that a seed of the run beats a seed of the first run on its env "
+            "(fewer episodes or steps, higher returns) [bootstrap 95% interval]:",
+            "",
+            "| run | against | " + " | ".join(METRICS[name][0] for name in shown) + " |",
+            "|" + "---|" * (2 + len(shown)),
+        ]
+        by_run = {(r["run"], r["k"]): r for r in table}
+        for entry in better:
+            cells = [
+                label(by_run[entry["run"], entry["k"]]),
+                label(by_run[entry["baseline"], entry["baseline_k"]]),
+            ]
+            cells += [stats.improvement_text(entry[name]) for name in shown]
+            lines.append("| " + " | ".join(cells) + " |")
+    return lines
