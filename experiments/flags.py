@@ -170,7 +170,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--checkpoint-every", type=int, default=20, help="chunks between checkpoints (0: end only)"
     )
     p.add_argument("--quiet", action="store_true", help="no live progress display")
-    p.add_argument("--logger", default="none", choices=LOGGERS, help="extra metric sink")
+    p.add_argument(
+        "--logger",
+        default="none",
+        choices=LOGGERS,
+        help="extra metric sink: tensorboard (RUN/tensorboard) or wandb (RUN/wandb; offline "
+        "without a login or network, WANDB_MODE respected)",
+    )
+    p.add_argument("--wandb-project", metavar="NAME", help="wandb project (default ldn-jax)")
     p.add_argument(
         "--devices",
         help="devices to split the seeds over: N or 'all' (default 1; with --distributed, all)",
@@ -204,6 +211,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="compile the training chunk, print compile seconds, FLOPs and memory, write nothing",
     )
     args = p.parse_args(argv)
+    if args.wandb_project is not None and args.logger != "wandb":
+        raise UsageError("--wandb-project needs --logger wandb")
     if args.checkpoint_every < 0:
         raise UsageError("--checkpoint-every must be >= 0")
     cluster = [f for f in ("coordinator", "num_processes", "process_id") if getattr(args, f)]

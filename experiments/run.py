@@ -59,7 +59,11 @@ def main(argv: list[str] | None = None) -> int:
         if not args.resume:
             run = new_run_dir(args.out, config, held) if writer else RunDir(args.out)
         try:
-            logger = make_logger(args.logger, run.path) if writer else NullLogger()
+            logger = (
+                make_logger(args.logger, run.path, config, args.wandb_project)
+                if writer
+                else NullLogger()
+            )
         except ValueError as error:
             raise UsageError(str(error)) from None
         options = TrainOptions(

@@ -6,6 +6,7 @@
     DIR/curves.png           moving return against episodes
     DIR/eval.json            `ldn-jax eval`'s gymnasium evaluations, one entry per seed and K
     DIR/tensorboard/         with `--logger tensorboard`
+    DIR/wandb/               with `--logger wandb` (its run id in wandb/run-id, for resume)
     DIR/checkpoints/NAME/    the batched `TrainState` (orbax), NAME = chunk_00020 ... or final
     DIR/checkpoints/NAME.host.npz   beside it: history, session timings, the manifest
     DIR/.lock                held (flock) by the training process that writes here
@@ -113,6 +114,10 @@ class RunDir:
     @property
     def tensorboard_dir(self) -> Path:
         return self.path / "tensorboard"
+
+    @property
+    def wandb_dir(self) -> Path:
+        return self.path / "wandb"
 
     @property
     def checkpoints(self) -> Path:

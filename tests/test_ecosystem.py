@@ -209,7 +209,8 @@ def test_tensorboard_scalars_match_metrics_jsonl(ldn_run):
         (["plot", "{tmp}"], "no config.json"),
         (["plot", "{run}", "--out", "/proc/forbidden/x.png"], "cannot write"),
         (["plot"], "required: RUN_DIR"),
-        (["--logger", "wandb"], "invalid choice: 'wandb'"),
+        (["--logger", "mlflow"], "invalid choice: 'mlflow'"),
+        (["--wandb-project", "x"], "--wandb-project needs --logger wandb"),
     ],
 )
 def test_bad_input_exits_2_with_one_line(args, needle, ldn_run, tmp_path, capsys):
@@ -264,3 +265,62 @@ def test_compare_bad_input_exits_2_with_one_line(args, needle, tmp_path, capsys)
     assert entry_point()(argv) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and needle in err, err
+
+
+def wandb_records(path: Path) -> list:
+    """The records of a wandb run file (`run-ID.wandb`: wandb's leveldb-style log of 32 KiB
+    blocks, each record a 7-byte header (crc, length, type) and a protobuf `Record`)."""
+    from wandb.proto import wandb_internal_pb2
+
+    data, pos, block, records, partial = path.read_bytes(), 7, 32768, [], b""
+    assert data[:4] == b":W&B"
+    while pos + 7 <= len(data):
+        left = block - pos % block
+        _, length, kind = struct.unpack_from("<IHB", data, pos)
+        if left < 7 or (length, kind) == (0, 0):  # the rest of the block is padding
+            pos += left
+            continue
+        partial += data[pos + 7 : pos + 7 + length]
+        pos += 7 + length
+        if kind in (1, 4):  # FULL, LAST
+            record = wandb_internal_pb2.Record()
+            record.ParseFromString(partial)
+            records.append(record)
+            partial = b""
+    return records
+
+
+def test_wandb_offline_holds_every_metric_and_the_config(tmp_path):
+    env = {k: v for k, v in os.environ.items() if not k.startswith("WANDB_")}
+    env |= {f"WANDB_{d}_DIR": str(tmp_path / d.lower()) for d in ("CONFIG", "CACHE", "DATA")}
+    out = tmp_path / "run"
+    args = ["--env", "cartpole-v1", "--algo", "ldn", "--k", "1", "--episodes", "24", *TINY]
+    args[args.index("--seeds") + 1] = "2"
+    args += ["--logger", "wandb", "--wandb-project", "ldn-test", "--out", str(out)]
+    command = [sys.executable, str(ROOT / "experiments" / "run.py"), *args]
+    result = subprocess.run(
+        command, capture_output=True, text=True, timeout=300, env=env, cwd=tmp_path
+    )
+    assert result.returncode == 0, result.stderr
+    assert result.stderr.count("\n") == 1 and "logging offline under" in result.stderr
+    (run_file,) = (out / "wandb").glob("offline-run-*/run-*.wandb")
+    records = wandb_records(run_file)
+    history = [r.history for r in records if r.WhichOneof("record_type") == "history"]
+    lines = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
+    assert len(history) == len(lines) // 2 == 6  # one wandb step per iteration, 2 seeds each
+    key = lambda item: "/".join(item.nested_key) or item.key
+    logged = [{key(i): json.loads(i.value_json) for i in h.item} for h in history]
+    for line in lines:
+        row = logged[line["iteration"] - 1]
+        prefix = f"seed{line['seed']}_k1"
+        assert row[f"{prefix}/episodes"] == line["episodes"]
+        assert row[f"{prefix}/moving_return"] == pytest.approx(line["moving_return"])
+        for name, value in line["losses"].items():
+            if value is not None:
+                assert row[f"{prefix}/{name}"] == pytest.approx(value)
+    (run,) = [r.run for r in records if r.WhichOneof("record_type") == "run"]
+    assert (
+        run.project == "ldn-test" and run.run_id == (out / "wandb" / "run-id").read_text().strip()
+    )
+    config = {i.key: json.loads(i.value_json) for i in run.config.update}
+    assert config["algo"] == "ldn" and config["agent"]["gamma"] == 0.9
