@@ -28,6 +28,7 @@ if str(ROOT) not in sys.path:  # run as `python experiments/paper/NAME.py`
     sys.path.insert(0, str(ROOT))
 
 import envs  # noqa: E402
+from experiments import stats  # noqa: E402
 from experiments.training import train  # noqa: E402
 from ldn_jax.config import Config, from_preset, validate  # noqa: E402
 from ldn_jax.run_dir import RunDir  # noqa: E402
@@ -389,18 +390,30 @@ def mujoco_curves(
 
 
 def describe(values: list[float | None]) -> dict:
-    """min, max, mean, s.d. (ddof 1) over the runs that have a value; `reached` counts them."""
+    """min, max, mean, s.d. (ddof 1), and the IQM with its bootstrap 95% interval
+    (`experiments.stats`), over the runs that have a value; `reached` counts them."""
     have = np.array([v for v in values if v is not None], float)
     out = {"reached": int(have.size), "runs": len(values)}
     if have.size == 0:
-        return {**out, "min": None, "max": None, "mean": None, "sd": None}
+        return {
+            **out,
+            "min": None,
+            "max": None,
+            "mean": None,
+            "sd": None,
+            "iqm": None,
+            "ci95": None,
+        }
     sd = float(have.std(ddof=1)) if have.size > 1 else None
+    estimate = stats.estimate(have)
     return {
         **out,
         "min": float(have.min()),
         "max": float(have.max()),
         "mean": float(have.mean()),
         "sd": sd,
+        "iqm": estimate["iqm"],
+        "ci95": estimate["ci95"],
     }
 
 
@@ -417,13 +430,26 @@ def write_json(path: Path, data: dict, compact: bool = False) -> None:
 
 
 def write_csv(path: Path, rows: list[dict]) -> None:
-    """Rows of scalars; a missing or None value is written as an empty cell."""
+    """Rows of scalars; a missing or None value is written as an empty cell, an interval
+    `ci95` as two columns `ci95_low` and `ci95_high`."""
+    rows = [_split_intervals(row) for row in rows]
     fields = list(dict.fromkeys(name for row in rows for name in row))
     with open(path, "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=fields)
         writer.writeheader()
         for row in rows:
             writer.writerow({k: _cell(v) for k, v in row.items()})
+
+
+def _split_intervals(row: dict) -> dict:
+    out = {}
+    for name, value in row.items():
+        if name.endswith("ci95"):
+            low, high = value if value is not None else (None, None)
+            out |= {f"{name}_low": low, f"{name}_high": high}
+        else:
+            out[name] = value
+    return out
 
 
 def _cell(value):

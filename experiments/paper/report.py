@@ -18,6 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from scipy import stats
 
+from experiments import stats as iqm_stats
 from experiments.paper import common
 
 NAMES = ("table2", "table3", "figure5", "figure9", "calibration", "table4", "table5", "targets")
@@ -43,6 +44,20 @@ def pm(mean, sd, digits: int = 1) -> str:
     if mean is None:
         return "–"
     return f"{fmt(mean, digits)} ± {fmt(sd, digits)}" if sd is not None else fmt(mean, digits)
+
+
+def iqm(record: dict, digits: int = 0) -> str:
+    """A record's IQM with its bootstrap 95% interval, `512 [480, 540]` ("–" in result files
+    from before the IQM)."""
+    return iqm_stats.text({"iqm": record.get("iqm"), "ci95": record.get("ci95")}, digits)
+
+
+def better(x: list, y: list, lower_is_better: bool) -> str:
+    """The probability that a seed of X does better than a seed of Y, with its bootstrap
+    95% interval, over the values that are not None."""
+    x, y = [v for v in x if v is not None], [v for v in y if v is not None]
+    value = iqm_stats.improvement(x, y, lower_is_better=lower_is_better)
+    return f"P(better) = {iqm_stats.improvement_text(value)}"
 
 
 def algo_name(algo: str) -> str:
@@ -150,6 +165,13 @@ def setup(data: dict, scale: common.Scale) -> Section:
         "stated. Episodes to threshold count real episodes in completion order; a run that never "
         "reaches the threshold within the budget is left out of mean and s.d. and counted in "
         "*reached*.",
+        "Statistics (Agarwal et al., NeurIPS 2021): *IQM* is the interquartile mean over seeds "
+        "(the mean of the middle half), with a bootstrap 95% interval (2,000 resamples, "
+        "percentile; `experiments/stats.py`, scipy); *P(better)* is the probability that a "
+        "seed of the first algorithm does better than a seed of the second (fewer episodes, or "
+        "a higher return), with its bootstrap interval; 0.5 is a tie. The paper's own columns "
+        "(mean ± s.d.) are kept beside them. `ldn-jax compare RUN_DIR ...` prints the same for "
+        "any runs.",
         f"MuJoCo (Tables 4 and 5, Figure 9's MuJoCo panels): {mujoco}{mujoco_time(data)}",
         f"Machine: {machine['cpu']}, {machine['cores']} cores, JAX backend "
         f"{machine['jax_backend']}; jax {machine['jax']}, jaxlib {machine['jaxlib']}, Python "
@@ -201,7 +223,7 @@ def _pending(r: dict, columns: int) -> list[str]:
 
 def table2_section(table: dict) -> Section:
     rows = []
-    header = ["env", "algorithm", "ours: mean ± s.d.", "min", "max", "reached"]
+    header = ["env", "algorithm", "ours: mean ± s.d.", "IQM [95% CI]", "min", "max", "reached"]
     header.append("paper: mean ± s.d.")
     for r in table["rows"]:
         if r["status"] != "done":
@@ -212,6 +234,7 @@ def table2_section(table: dict) -> Section:
                 r["env"],
                 algo_name(r["algo"]),
                 pm(r["mean"], r["sd"]),
+                iqm(r),
                 fmt(r["min"], 0),
                 fmt(r["max"], 0),
                 f"{r['reached']}/{r['runs']}",
@@ -240,17 +263,19 @@ PAPER_ORDER = ("ldn", "a2c-model", "a2c")
 
 
 def compare(a: dict, b: dict) -> str:
-    """`a` vs `b` (rows with per-seed episodes): the difference of means and a two-sided
-    Mann-Whitney p over the seeds that reached the threshold."""
+    """`a` vs `b` (rows with per-seed episodes): the difference of means, a two-sided
+    Mann-Whitney p and the probability that a seed of `a` takes fewer episodes than one of
+    `b`, over the seeds that reached the threshold."""
     p = mann_whitney_p(a["episodes_to_threshold"], b["episodes_to_threshold"])
     if p is None:
         return f"{algo_name(a['algo'])} vs {algo_name(b['algo'])}: too few runs reached"
     paper = a["paper_mean"] < b["paper_mean"]
     ours = a["mean"] < b["mean"]
     agree = "as in the paper" if ours == paper else "unlike the paper"
+    improvement = better(a["episodes_to_threshold"], b["episodes_to_threshold"], True)
     return (
         f"{algo_name(a['algo'])} {a['mean'] - b['mean']:+.0f} episodes vs "
-        f"{algo_name(b['algo'])} (Mann-Whitney p = {p:.2g}; {agree})"
+        f"{algo_name(b['algo'])} (Mann-Whitney p = {p:.2g}, {improvement}; {agree})"
     )
 
 
@@ -429,8 +454,9 @@ def figure9_section(data: dict) -> Section:
 
 
 def figure9_table(panel: dict) -> Table:
-    header = ["K", "episodes to threshold: mean ± s.d.", "min", "max", "reached"]
-    header += ["final moving return: mean ± s.d.", "imagined steps per seed"]
+    header = ["K", "episodes to threshold: mean ± s.d.", "IQM [95% CI]", "min", "max"]
+    header += ["reached", "final moving return: mean ± s.d.", "IQM [95% CI]"]
+    header.append("imagined steps per seed")
     header.append("mean LD, last 10 iterations")
     rows = []
     for r in panel["rows"]:
@@ -439,10 +465,12 @@ def figure9_table(panel: dict) -> Table:
             [
                 f"{r['k']:g}",
                 pm(r["mean"], r["sd"]),
+                iqm(r),
                 fmt(r["min"], 0),
                 fmt(r["max"], 0),
                 f"{r['reached']}/{r['runs']}",
                 pm(final["mean"], final["sd"]),
+                iqm(final),
                 fmt(r["imagined_steps_per_seed"], 0),
                 f"{r['ld_mean_last_iterations']:.3f}",
             ]
@@ -678,7 +706,8 @@ def table4_section(table: dict) -> Section:
         "algorithms, not the values. Curves: ![table 4](table4/table4.png)"
     )
     header = ["env", "algorithm", "budget", "episodes per seed", "env steps per seed"]
-    header += ["final moving return: mean ± s.d.", "min", "max", "greedy eval return", "paper"]
+    header += ["final moving return: mean ± s.d.", "IQM [95% CI]", "min", "max"]
+    header += ["greedy eval return", "paper"]
     done = [r for r in table["rows"] if r["status"] == "done"]
     rows = [
         [
@@ -688,6 +717,7 @@ def table4_section(table: dict) -> Section:
             fmt(r.get("episodes_per_seed", r["episodes"]), 0),
             fmt(r["env_steps_per_seed"], 0),
             pm(r["mean"], r["sd"]),
+            iqm(r),
             fmt(r["min"]),
             fmt(r["max"]),
             pm(r["eval_return"]["mean"], r["eval_return"]["sd"]),
@@ -710,7 +740,8 @@ def table4_section(table: dict) -> Section:
             verdict = "NOT reproduced: A3C-Model higher (the paper: MBRL-LDN higher)"
         findings.append(
             f"Table 4, {env} ({budget(ldn)}): MBRL-LDN {ldn['mean']:.1f} vs "
-            f"A3C-Model {model['mean']:.1f} final moving return ({test}; paper "
+            f"A3C-Model {model['mean']:.1f} final moving return ({test}, "
+            f"{better(x, y, False)}; paper "
             f"{ldn['paper']} vs {model['paper']}): {verdict}."
         )
     title = TITLES["table4"]
@@ -723,8 +754,9 @@ def table5_section(table: dict) -> Section:
         f"(the dashed line in the figure). {table['seeds']} seeds per run. Curves: "
         "![table 5](table5/table5.png)"
     )
-    header = ["env", "algorithm", "the top", "episodes to the top: mean ± s.d.", "min", "max"]
-    header += ["reached", "final moving return", "greedy eval return", "paper"]
+    header = ["env", "algorithm", "the top", "episodes to the top: mean ± s.d.", "IQM [95% CI]"]
+    header += ["min", "max", "reached", "final moving return", "IQM [95% CI]"]
+    header += ["greedy eval return", "paper"]
     done = [r for r in table["rows"] if r["status"] == "done"]
     rows = [
         [
@@ -732,10 +764,12 @@ def table5_section(table: dict) -> Section:
             algo_name(r["algo"]),
             f"{r['top']:.0f}",
             pm(r["mean"], r["sd"]),
+            iqm(r),
             fmt(r["min"], 0),
             fmt(r["max"], 0),
             f"{r['reached']}/{r['runs']}",
             pm(r["final_moving_return"]["mean"], r["final_moving_return"]["sd"]),
+            iqm(r["final_moving_return"]),
             pm(r["eval_return"]["mean"], r["eval_return"]["sd"]),
             fmt(r["paper"]),
         ]
@@ -769,6 +803,8 @@ def table5_finding(env: str, algos: dict[str, dict]) -> str:
     tests = "; ".join(
         f"PPO2-LDN vs {algo_name(a)}: "
         + mann_whitney(algos["ppo-ldn"]["episodes_to_top"], algos[a]["episodes_to_top"])
+        + ", "
+        + better(algos["ppo-ldn"]["episodes_to_top"], algos[a]["episodes_to_top"], True)
         for a in ("ppo", "ppo-model")
         if a in algos and "ppo-ldn" in algos
     )
