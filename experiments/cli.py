@@ -23,6 +23,7 @@ from experiments import gym_eval, run
 from experiments.flags import Parser, UsageError
 from experiments.plots import compare_runs
 from ldn_jax import load_policy
+from ldn_jax.policy import point_index
 from ldn_jax.run_dir import RunDir, RunDirError
 
 
@@ -43,12 +44,19 @@ def evaluate(argv: list[str]) -> int:
     p.add_argument("run_dir", type=Path, help="a finished run directory")
     p.add_argument("--seed", type=int, default=0, help="which trained seed (default 0)")
     p.add_argument("--k", type=float, default=None, help="which K (default: the run's first)")
+    p.add_argument(
+        "--at",
+        action="append",
+        default=[],
+        metavar="FIELD=VALUE",
+        help="in a sweep, which point (repeatable; a field left out: its first value)",
+    )
     p.add_argument("--episodes", type=int, default=100, help="evaluation episodes")
     p.add_argument("--env-seed", type=int, default=0, help="seed of the first env reset")
     p.add_argument("--video", type=Path, default=None, help="save videos (rgb_array) here")
     try:
         args = p.parse_args(argv)
-        config, act, k = _load(args)
+        config, act, k, point = _load(args)
         env = gym_eval.make_env(config.env, render_mode="rgb_array" if args.video else None)
         returns = _episode_returns(env, act, args, k)
     except (UsageError, ValueError) as error:
@@ -59,6 +67,7 @@ def evaluate(argv: list[str]) -> int:
     result = {
         "seed": args.seed,
         "k": k,
+        **({"sweep": point} if config.sweep else {}),
         "episodes": args.episodes,
         "env_seed": args.env_seed,
         "mean_return": mean,
@@ -69,6 +78,7 @@ def evaluate(argv: list[str]) -> int:
     header = {"env": config.env, "gymnasium": gym_eval.gymnasium_name(config.env)}
     run_dir.record_eval(header, result)
     which = f"seed {args.seed}" + (f" K={k:g}" if config.uses_k else "")
+    which += "".join(f" {name}={value:g}" for name, value in point.items())
     print(
         f"{config.env} {config.algo} {which} in gymnasium "
         f"{gym_eval.gymnasium_name(config.env)}: return {mean:.1f} ± {std:.1f} (s.d.) "
@@ -78,7 +88,7 @@ def evaluate(argv: list[str]) -> int:
 
 
 def _load(args: argparse.Namespace):
-    """`(config, act, k)` of the run, or UsageError."""
+    """`(config, act, k, sweep values)` of the run, or UsageError."""
     run_dir = args.run_dir
     if not run_dir.is_dir():
         raise UsageError(f"no such run directory: {run_dir}")
@@ -91,9 +101,19 @@ def _load(args: argparse.Namespace):
         raise UsageError(str(error)) from None
     if not run.has_final_checkpoint():
         raise UsageError(f"{run_dir} has no final checkpoint (training not finished?)")
-    act = load_policy(run_dir, args.seed, args.k)  # ValueError names the valid seeds / K
-    k = config.k[0] if args.k is None else next(v for v in config.k if np.isclose(v, args.k))
-    return config, act, k
+    at = {}
+    for item in args.at:
+        name, sep, value = item.partition("=")
+        try:
+            at[name.strip()] = float(value)
+        except ValueError:
+            raise UsageError(f"--at needs FIELD=NUMBER, got {item!r}") from None
+        if not sep:
+            raise UsageError(f"--at needs FIELD=NUMBER, got {item!r}")
+    # ValueError names the valid seeds, K and sweep values
+    act = load_policy(run_dir, args.seed, args.k, at)
+    values = dict(config.points[point_index(config, args.k, at)])
+    return config, act, values.pop("k"), values
 
 
 def _episode_returns(env: gymnasium.Env, act, args: argparse.Namespace, k: float) -> np.ndarray:

@@ -25,9 +25,10 @@ METRICS = {
 
 
 def rows(run_dirs: list[Path]) -> list[dict]:
-    """One row per run and K: its name (the directory's, or its path where two share a
-    name), env, algo, K, seeds, how many reached the threshold, and per metric the per-seed
-    values and `stats.estimate` of them."""
+    """One row per run and point (K, and a sweep's values): its name (the directory's, or
+    its path where two share a name), env, algo, K, the point's name, seeds, how many
+    reached the threshold, and per metric the per-seed values and `stats.estimate` of
+    them."""
     out = []
     names = [d.name for d in run_dirs]
     for run_dir in run_dirs:
@@ -41,13 +42,15 @@ def rows(run_dirs: list[Path]) -> list[dict]:
             raise ValueError(f"{run_dir} has no summary.json (training not finished?)") from None
         except ValueError as error:
             raise RunDirError(f"{run_dir}: unreadable summary.json ({error})") from None
-        for k in config.k:
-            seeds = [r for r in summary["runs"] if r["k"] == k]
+        for index, point in enumerate(config.points):
+            k, sweep = point["k"], {n: v for n, v in point.items() if n != "k"}
+            seeds = [r for r in summary["runs"] if r["k"] == k and r.get("sweep", {}) == sweep]
             row = {
                 "run": run_dir.name if names.count(run_dir.name) == 1 else str(run_dir),
                 "env": config.env,
                 "algo": config.algo,
                 "k": k if config.uses_k else None,
+                "point": config.point_name(index),
                 "seeds": len(seeds),
                 "threshold": summary.get("threshold"),
                 "reached": sum(r["episodes_to_threshold"] is not None for r in seeds),
@@ -68,7 +71,8 @@ def improvements(table: list[dict]) -> list[dict]:
         base = next(r for r in table if r["env"] == row["env"])
         if base is row:
             continue
-        entry = {"run": row["run"], "k": row["k"], "baseline": base["run"], "baseline_k": base["k"]}
+        entry = {"run": row["run"], "point": row["point"], "baseline": base["run"]}
+        entry["baseline_point"] = base["point"]
         for name, (_, lower) in METRICS.items():
             entry[name] = stats.improvement(
                 row[name]["values"], base[name]["values"], lower_is_better=lower
@@ -78,8 +82,8 @@ def improvements(table: list[dict]) -> list[dict]:
 
 
 def label(row: dict) -> str:
-    k = f" K={row['k']:g}" if row["k"] is not None else ""
-    return f"{row['run']} ({row['algo']}{k})"
+    point = f" {row['point']}" if row["point"] else ""
+    return f"{row['run']} ({row['algo']}{point})"
 
 
 def render(table: list[dict], better: list[dict]) -> list[str]:
@@ -107,11 +111,11 @@ def render(table: list[dict], better: list[dict]) -> list[str]:
             "| run | against | " + " | ".join(METRICS[name][0] for name in shown) + " |",
             "|" + "---|" * (2 + len(shown)),
         ]
-        by_run = {(r["run"], r["k"]): r for r in table}
+        by_run = {(r["run"], r["point"]): r for r in table}
         for entry in better:
             cells = [
-                label(by_run[entry["run"], entry["k"]]),
-                label(by_run[entry["baseline"], entry["baseline_k"]]),
+                label(by_run[entry["run"], entry["point"]]),
+                label(by_run[entry["baseline"], entry["baseline_point"]]),
             ]
             cells += [stats.improvement_text(entry[name]) for name in shown]
             lines.append("| " + " | ".join(cells) + " |")

@@ -159,6 +159,15 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "model.support=none, k=0.5,1 (repeatable; --list-fields names them all)",
     )
     p.add_argument(
+        "--sweep",
+        action="append",
+        default=[],
+        metavar="FIELD=V1,V2,...",
+        help="vmap a grid of a float field's values beside seeds and K, one compiled program "
+        "for the whole grid, e.g. agent.actor_lr=1e-3,3e-4 (repeatable: the grid of all "
+        "combinations; ints, bools and strings need separate runs)",
+    )
+    p.add_argument(
         "--list-fields",
         action="store_true",
         help="print every config field with its type and its value under the other flags "
@@ -259,7 +268,12 @@ def requested(args: argparse.Namespace) -> tuple[str | None, dict[str, tuple[obj
             raise UsageError(f"--set needs FIELD=VALUE, got {item!r}")
         if name in given:
             raise UsageError(f"--set {item}: {name} is already given by {given[name][1]}")
+        if name == "sweep":
+            raise UsageError(f"--set {item}: a sweep is given with --sweep FIELD=V1,V2,...")
         given[name] = (parse_value(name, text.strip(), f"--set {item}"), f"--set {item}")
+    if args.sweep:
+        where = " ".join(f"--sweep {item}" for item in args.sweep)
+        given["sweep"] = (tuple(parse_sweep(item) for item in args.sweep), where)
     if "steps" in given and "episodes" in given:
         raise UsageError(
             f"give {given['steps'][1]} or {given['episodes'][1]}, not both (one budget per run)"
@@ -292,6 +306,7 @@ def read_config_file(path: str) -> tuple[str | None, dict[str, tuple[object, str
         raise UsageError(f"--config {path}: expected a table of config fields")
     data.pop("run_format", None)
     preset = data.pop("preset", None)
+    sweep = data.pop("sweep", None)
     if preset is not None and not isinstance(preset, str):
         raise UsageError(f"--config {path}: preset must be a string, got {preset!r}")
     flat = {}
@@ -303,7 +318,44 @@ def read_config_file(path: str) -> tuple[str | None, dict[str, tuple[object, str
         else:
             flat[key] = value
     where = f"--config {path}"
-    return preset, {name: (check_value(name, v, where), where) for name, v in flat.items()}
+    settings = {name: (check_value(name, v, where), where) for name, v in flat.items()}
+    if sweep is not None:
+        settings["sweep"] = (check_sweep(sweep, where), where)
+    return preset, settings
+
+
+def parse_sweep(item: str) -> tuple[str, tuple[float, ...]]:
+    """`--sweep FIELD=V1,V2,...` -> `(field, values)`; which fields may be swept is
+    `validate`'s to say."""
+    name, sep, text = item.partition("=")
+    name = name.strip()
+    field_type(name, f"--sweep {item}")  # an unknown field: one line, the closest named
+    try:
+        values = tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        values = ()
+    if not sep or not values:
+        raise UsageError(f"--sweep needs FIELD=V1,V2,... with numbers, got {item!r}")
+    return name, values
+
+
+def check_sweep(sweep, where: str) -> tuple[tuple[str, tuple[float, ...]], ...]:
+    """A file's sweep: config.json's `[[field, [values]], ...]`, or a table
+    `{field: [values]}` (TOML's `[sweep]`)."""
+    pairs = sweep.items() if isinstance(sweep, dict) else sweep
+    try:
+        out = []
+        for name, values in pairs:
+            field_type(name, where)
+            if not all(_is(float, v) for v in values):
+                raise TypeError
+            out.append((name, tuple(float(v) for v in values)))
+    except (TypeError, ValueError):
+        raise UsageError(
+            f"{where}: sweep must be a table of field = [values] or config.json's "
+            f"[[field, [values]], ...], got {sweep!r}"
+        ) from None
+    return tuple(out)
 
 
 def field_type(name: str, where: str) -> FieldType:
@@ -365,6 +417,8 @@ def list_fields(config: Config) -> list[str]:
     table, docs = fields(), field_docs()
     width = max(map(len, table))
     lines = [f"{'preset':<{width}}  {'str':<24}  {config.preset:<12}  one of: {', '.join(PRESETS)}"]
+    swept = " ".join(f"{n}={_as_text(v)}" for n, v in config.sweep) or "none"
+    lines.append(f"{'sweep':<{width}}  {'--sweep FIELD=V1,V2':<24}  {swept:<12}  vmapped grid")
     for name, kind in table.items():
         value = _as_text(get_field(config, name))
         lines.append(f"{name:<{width}}  {kind.describe():<24}  {value:<12}  {docs.get(name, '')}")

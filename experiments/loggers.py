@@ -26,6 +26,15 @@ STEP_METRICS = ("iteration", "episodes")
 """Counters, not curves: `episodes` is the x axis (TensorBoard's global step)."""
 
 
+def tag_prefix(config: Config, point: int, seed: int) -> str:
+    """`seed{S}_k{K}`, and in a sweep `_{field}={value}` for each swept field (e.g.
+    `seed0_k1_agent.actor_lr=0.0003`): the part of a metric's name that names its run."""
+    values = config.points[point]
+    return f"seed{seed}_k{values['k']:g}" + "".join(
+        f"_{name}={values[name]:g}" for name, _ in config.sweep
+    )
+
+
 class Logger(Protocol):
     def log(self, config: Config, metrics: dict[str, np.ndarray], wall_seconds: float) -> None:
         """Record one chunk's metrics `[K, S, N, ...]`; `wall_seconds`: training time so far."""
@@ -45,7 +54,8 @@ class NullLogger:
 class TensorBoardLogger:
     """Scalars into `RUN_DIR/tensorboard/`, one tag per metric per seed and K.
 
-    Tags read `seed{S}_k{K}/{metric}` (e.g. `seed0_k1/moving_return`); the global step is the
+    Tags read `seed{S}_k{K}/{metric}` (e.g. `seed0_k1/moving_return`; a sweep adds its values,
+    `tag_prefix`); the global step is the
     real episode count, as in metrics.jsonl and curves.png. Every metric that holds one value
     per iteration is written; per-episode arrays (`returns`, `lengths`, ...) are not. The event
     wall time is the logger's start plus training seconds, so TensorBoard's "relative" axis
@@ -65,7 +75,7 @@ class TensorBoardLogger:
         walltime = self.start + wall_seconds
         for ki in range(n_k):
             for seed in range(seeds):
-                prefix = f"seed{seed}_k{config.k[ki]:g}"
+                prefix = tag_prefix(config, ki, seed)
                 for i in range(n_iter):
                     step = int(metrics["episodes"][ki, seed, i])
                     for name in names:
@@ -134,7 +144,7 @@ class WandbLogger:
             row = {"train_seconds": wall_seconds}
             for ki in range(n_k):
                 for seed in range(seeds):
-                    prefix = f"seed{seed}_k{config.k[ki]:g}"
+                    prefix = tag_prefix(config, ki, seed)
                     if prefix not in self.defined:
                         self.run.define_metric(f"{prefix}/*", step_metric=f"{prefix}/episodes")
                         self.defined.add(prefix)

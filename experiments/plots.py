@@ -57,7 +57,8 @@ def learning_curves(
 
 def run_curves(run_dir: Path, name: str) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], Config]:
     """Moving return vs episodes of one run directory: `{label: (episodes [T], returns [S, T])}`
-    with a label `name: algo K=k` per K (K left out where it does not matter), and its config.
+    with a label `name: algo K=k` per K (K left out where it does not matter; a sweep's
+    values added), and its config.
 
     Raises ValueError with a one-line message for a missing or unreadable run.
     """
@@ -71,13 +72,14 @@ def run_curves(run_dir: Path, name: str) -> tuple[dict[str, tuple[np.ndarray, np
         raise ValueError(f"{run_dir} has no metrics yet (no metrics.jsonl)") from None
     except (OSError, UnicodeDecodeError, KeyError, TypeError) as error:
         raise ValueError(f"{run_dir}: unreadable metrics.jsonl ({error})") from None
-    points: dict[float, dict[int, dict[int, tuple]]] = {}
+    points: dict[tuple, dict[int, dict[int, tuple]]] = {}
     for line in lines:
-        logged = points.setdefault(line["k"], {}).setdefault(line["seed"], {})
+        point = (line["k"], tuple(line.get("sweep", {}).items()))
+        logged = points.setdefault(point, {}).setdefault(line["seed"], {})
         logged[line["iteration"]] = (line["episodes"], line["moving_return"])
     show_k = len(config.k) > 1 or config.uses_k
     curves = {}
-    for k, by_seed in points.items():
+    for (k, sweep), by_seed in points.items():
         # Iterations every seed has logged: a run still training may be ahead in some seeds.
         iterations = sorted(set.intersection(*(set(logged) for logged in by_seed.values())))
         if not iterations:
@@ -85,7 +87,9 @@ def run_curves(run_dir: Path, name: str) -> tuple[dict[str, tuple[np.ndarray, np
         any_seed = next(iter(by_seed.values()))
         episodes = np.array([any_seed[i][0] for i in iterations])
         returns = np.array([[logged[i][1] for i in iterations] for logged in by_seed.values()])
-        curves[f"{name}: {config.algo}" + (f" K={k:g}" if show_k else "")] = (episodes, returns)
+        label = f"{name}: {config.algo}" + (f" K={k:g}" if show_k else "")
+        label += "".join(f" {field}={value:g}" for field, value in sweep)
+        curves[label] = (episodes, returns)
     if not curves:
         raise ValueError(f"{run_dir} has no metrics yet")
     return curves, config

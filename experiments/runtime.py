@@ -91,7 +91,8 @@ def dry_run(config: Config, mesh=None, cache: Path | None = None, bitwise: bool 
     """Compile the chunk program without computing anything and print what it costs."""
     trainer = Trainer(config)
     states = sharding.abstract(jax.eval_shape(trainer.init_batch), mesh)
-    k = trainer.k_values() if mesh is None else sharding.replicate(trainer.k_values(), mesh)
+    k = trainer.point_values()
+    k = k if mesh is None else sharding.replicate(k, mesh)
     compiled, lower_s, compile_s = compile_chunk(trainer, states, k, mesh, bitwise)
     cost = compiled.cost_analysis()
     cost = (cost[0] if isinstance(cost, list | tuple) else cost) or {}
@@ -109,6 +110,7 @@ def dry_run(config: Config, mesh=None, cache: Path | None = None, bitwise: bool 
     }
     devices = 1 if mesh is None else mesh.size
     batch = f"{config.seeds} seeds" + (f" x {len(config.k)} K" if config.uses_k else "")
+    batch += "".join(f" x {len(values)} {name}" for name, values in config.sweep)
     mb = lambda n: f"{n / 2**20:,.1f} MB"
     print(
         f"dry run: {config.env} {config.algo}, {batch} on {devices} device(s), "

@@ -20,9 +20,18 @@ LOSS_SUFFIXES = ("_loss", "_entropy", "_approx_kl", "_clip_fraction")
 """Metrics written under "losses" in metrics.jsonl."""
 
 
-def run_name(config: Config, ki: int, seed: int) -> str:
-    """How messages name one run of the batch: `seed 1 K=0.5`, or `seed 1` where K is unused."""
-    return f"seed {seed}" + (f" K={config.k[ki]:g}" if config.uses_k else "")
+def run_name(config: Config, point: int, seed: int) -> str:
+    """How messages name one run of the batch: `seed 1 K=0.5`, or `seed 1` where K is unused,
+    with a sweep's values (`seed 1 agent.actor_lr=0.0003`)."""
+    return " ".join(filter(None, [f"seed {seed}", config.point_name(point)]))
+
+
+def point_fields(config: Config, point: int) -> dict:
+    """What metrics.jsonl and summary.json say of a point: its K, and in a sweep its values
+    (`"sweep": {field: value}`)."""
+    values = dict(config.points[point])
+    k = values.pop("k")
+    return {"k": k, "sweep": values} if config.sweep else {"k": k}
 
 
 def metric_lines(
@@ -43,7 +52,7 @@ def metric_lines(
                 line = {
                     "iteration": first_iteration + i,
                     "seed": seed,
-                    "k": config.k[ki],
+                    **point_fields(config, ki),
                     "episodes": int(at("episodes")),
                     "env_steps": int(at("env_steps")),
                     "imagined_steps": int(at("imagined_steps")),
@@ -97,7 +106,7 @@ def summarize(config: Config, history: dict, eval_returns, states, session: dict
     total_steps = int(history["env_steps"][..., -1].sum())
     runs = []
     per_chunk = config.chunk_iterations
-    for ki, k in enumerate(config.k):
+    for ki in range(len(config.points)):
         for seed in range(config.seeds):
             crossing = None
             if threshold is not None:
@@ -116,7 +125,7 @@ def summarize(config: Config, history: dict, eval_returns, states, session: dict
             runs.append(
                 {
                     "seed": seed,
-                    "k": k,
+                    **point_fields(config, ki),
                     "episodes_to_threshold": crossing[0] if crossing else None,
                     "env_steps_to_threshold": crossing[1] if crossing else None,
                     "seconds_to_threshold": round(seconds, 3) if seconds else None,
@@ -158,13 +167,15 @@ STATISTICS = (
 
 
 def statistics(config: Config, runs: list[dict]) -> list[dict]:
-    """Per K, each of `STATISTICS` over the seeds: the interquartile mean with its bootstrap
-    95% interval, beside mean and s.d. (`experiments.stats.estimate`). To-threshold counts
-    are over the runs that reached it (`reached` of `runs`)."""
+    """Per point (K, and a sweep's values), each of `STATISTICS` over the seeds: the
+    interquartile mean with its bootstrap 95% interval, beside mean and s.d.
+    (`experiments.stats.estimate`). To-threshold counts are over the runs that reached it
+    (`reached` of `runs`)."""
     out = []
-    for k in config.k:
-        here = [r for r in runs if r["k"] == k]
-        entry = {"k": k, "runs": len(here)}
+    for index in range(len(config.points)):
+        point = point_fields(config, index)
+        here = [r for r in runs if all(r[n] == v for n, v in point.items())]
+        entry = {**point, "runs": len(here)}
         entry["reached"] = sum(r["episodes_to_threshold"] is not None for r in here)
         for name in STATISTICS:
             values = [r[name] for r in here if r[name] is not None]
@@ -180,9 +191,10 @@ def plot_curves(config: Config, history: dict, run: RunDir) -> None:
     n_k, seeds = after.shape[:2]
     returns = after.reshape(n_k, seeds, -1)
     episodes = np.arange(1, returns.shape[-1] + 1)
+    label = lambda i: " ".join([config.algo, config.point_name(i)]).strip()
     curves = {
-        (f"{config.algo} K={k:g}" if len(config.k) > 1 else config.algo): (episodes, returns[ki])
-        for ki, k in enumerate(config.k)
+        (label(i) if len(config.points) > 1 else config.algo): (episodes, returns[i])
+        for i in range(len(config.points))
     }
     title = f"{config.env}: {config.algo}"
     learning_curves(curves, run.curves_file, title, config.resolved_threshold)
@@ -195,10 +207,11 @@ def closing_lines(config: Config, summary: dict, run: RunDir) -> None:
         reached = [r for r in runs if r["episodes_to_threshold"] is not None]
         outcome = f"{len(reached)}/{len(runs)} runs reached {summary['threshold']}"
         if len(reached) > 1:
+            many = len(summary["statistics"]) > 1
             iqms = [
                 stats.text(s["episodes_to_threshold"])
-                + (f" (K={s['k']:g})" if len(summary["statistics"]) > 1 else "")
-                for s in summary["statistics"]
+                + (f" ({config.point_name(i)})" if many and config.point_name(i) else "")
+                for i, s in enumerate(summary["statistics"])
             ]
             outcome += f", episodes to it: IQM [95% CI] {'; '.join(iqms)}"
     else:  # no threshold to reach: what the runs ended at

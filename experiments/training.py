@@ -116,7 +116,7 @@ def train(config: Config, out: Path, options: TrainOptions | None = None, **fiel
         run.truncate_metrics(session["chunks_done"] * config.chunk_iterations)
     last_failure = history["failure"][-1][..., -1] if history.get("failure") else None
     reported = summaries.report_failures(config, last_failure, set())
-    k = trainer.k_values()
+    k = trainer.point_values()
     if mesh is not None:
         states, k = sharding.place(states, mesh), sharding.replicate(k, mesh)
 

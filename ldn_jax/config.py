@@ -8,6 +8,7 @@ n-step 10, entropy 0.001, ReLU6 hidden layers, N(0, 0.1) weights, 8 workers).
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 import types
 import typing
@@ -205,6 +206,10 @@ class Config:
     chunk_iterations: int = 5
     """Iterations per compiled chunk: the host logs and checkpoints between chunks
     (`from_preset`: `DEFAULT_CHUNK` where an env has its own)."""
+    sweep: tuple[tuple[str, tuple[float, ...]], ...] = ()
+    """A grid of float fields, `((name, values), ...)` (`agent.actor_lr`, `model.lr`, ...: one
+    of `SWEEPABLE`): every combination of the values, for every K, is one point of the
+    vmapped program (`points`), so a sweep compiles once. Empty: no sweep."""
     agent: AgentConfig = field(default_factory=AgentConfig)
     model: ModelConfig = field(default_factory=ModelConfig)
 
@@ -254,6 +259,31 @@ class Config:
         return ALGORITHMS[self.algo]
 
     @property
+    def points(self) -> list[dict[str, float]]:
+        """The vmapped runs beside the seeds: one `{"k": K, field: value, ...}` per K and
+        combination of the sweep's values, K outermost, the sweep's fields in their order
+        (the last varying fastest). Without a sweep, `[{"k": K}]` for each K."""
+        names = [name for name, _ in self.sweep]
+        grid = itertools.product(*(values for _, values in self.sweep))
+        combos = [dict(zip(names, combo, strict=True)) for combo in grid]
+        return [{"k": k, **combo} for k in self.k for combo in combos]
+
+    def point_name(self, index: int) -> str:
+        """How messages and logs name a point: `K=0.5 agent.actor_lr=0.0003`, the parts
+        that vary (K only where it matters); "" for a run of one point."""
+        point = self.points[index]
+        parts = [f"K={point['k']:g}"] if self.uses_k else []
+        parts += [f"{name}={point[name]:g}" for name, _ in self.sweep]
+        return " ".join(parts)
+
+    def at_point(self, index: int) -> Config:
+        """The config of one point: its K alone and its sweep values set, no sweep (a single
+        run of the sweep)."""
+        point = self.points[index]
+        config = dataclasses.replace(self, k=(point["k"],), sweep=())
+        return with_values(config, {n: v for n, v in point.items() if n != "k"})
+
+    @property
     def iterations(self) -> int:
         """Iterations needed for `episodes` real episodes, rounded up to whole chunks; with a
         `steps` budget, the most it can take (every episode one step long): runs stop as
@@ -276,6 +306,7 @@ class Config:
         agent = AgentConfig(**data.pop("agent", {}))
         model = ModelConfig(**data.pop("model", {}))
         data["k"] = tuple(data.get("k", (1.0,)))
+        data["sweep"] = tuple((name, tuple(values)) for name, values in data.get("sweep", ()))
         return cls(**data, agent=agent, model=model)
 
 
@@ -476,9 +507,35 @@ def fields() -> dict[str, FieldType]:
         if name in SECTIONS:
             for sub, sub_hint in typing.get_type_hints(SECTIONS[name]).items():
                 table[f"{name}.{sub}"] = _field_type(sub_hint)
-        elif name != "preset":
+        elif name not in ("preset", "sweep"):
             table[name] = _field_type(hint)
     return table
+
+
+def sweepable() -> tuple[str, ...]:
+    """The fields a sweep can vary (`Config.sweep`): every float field the compiled program
+    reads as a number. Not: K (`k` is its own axis), `threshold` (read by the host, after
+    training), the initialisers' `init_std` (they shape the network modules), and every
+    int, bool or str field (sizes, counts, choices: they change the program's shapes or
+    code, so they need separate runs)."""
+    excluded = {"threshold", "agent.init_std", "model.init_std"}
+    return tuple(
+        name
+        for name, kind in fields().items()
+        if kind.base is float and not kind.sequence and name not in excluded
+    )
+
+
+def with_values(config: Config, values: dict) -> Config:
+    """`config` with the dotted fields `values` replaced, unvalidated (the values may be
+    traced arrays inside a compiled sweep)."""
+    top = {n: v for n, v in values.items() if "." not in n}
+    parts = {}
+    for section in SECTIONS:
+        inner = {n.split(".", 1)[1]: v for n, v in values.items() if n.startswith(f"{section}.")}
+        if inner:
+            parts[section] = dataclasses.replace(getattr(config, section), **inner)
+    return dataclasses.replace(config, **top, **parts)
 
 
 def _field_type(hint) -> FieldType:
@@ -585,4 +642,38 @@ def validate(config: Config) -> Config:
     for ok, message in checks:
         if not ok:
             raise ValueError(message)
+    _validate_sweep(config)
     return config
+
+
+def _validate_sweep(config: Config) -> None:
+    """A sweep names sweepable fields once each, with distinct finite values, and every
+    point's config is valid."""
+    names = [name for name, _ in config.sweep]
+    allowed = sweepable()
+    for name, values in config.sweep:
+        if name == "k":
+            raise ValueError("sweep k: K is its own axis; give the values with --k")
+        if name not in fields():
+            raise ValueError(f"sweep {name}: unknown config field")
+        if name not in allowed:
+            kind = fields()[name].describe()
+            raise ValueError(
+                f"sweep {name}: only float fields the compiled program reads can be swept "
+                f"({name} is {kind}"
+                + (", read after training" if name == "threshold" else "")
+                + (", it shapes the networks" if name.endswith("init_std") else "")
+                + "); it needs separate runs"
+            )
+        if names.count(name) > 1:
+            raise ValueError(f"sweep {name}: given twice")
+        if len(values) < 1 or len(set(values)) != len(values):
+            raise ValueError(f"sweep {name}: needs distinct values, got {list(values)}")
+        if not all(isinstance(v, float) and math.isfinite(v) for v in values):
+            raise ValueError(f"sweep {name}: values must be finite numbers, got {list(values)}")
+    if config.sweep:
+        for index in range(len(config.points)):
+            try:
+                validate(config.at_point(index))
+            except ValueError as error:
+                raise ValueError(f"sweep point {config.point_name(index)}: {error}") from None

@@ -13,19 +13,20 @@ from ldn_jax.train import Trainer
 
 
 def load_policy(
-    run_dir: str | Path, seed: int = 0, k: float | None = None
+    run_dir: str | Path, seed: int = 0, k: float | None = None, at: dict | None = None
 ) -> Callable[[np.ndarray], int | np.ndarray]:
     """The greedy policy of one seed and K of a finished run.
 
     Returns `act(obs)`: a numpy observation in; out a Python int (discrete actions) or a
     float32 numpy array within the action bounds (continuous: the Gaussian's mean).
-    `k=None` picks the run's only K, or its first one.
+    `k=None` picks the run's only K, or its first one. In a sweep, `at` picks the point by
+    its values (`{"agent.actor_lr": 3e-4}`); a field left out takes its first value.
     """
     run = RunDir(run_dir)
     config = run.read_config()
     if not 0 <= seed < config.seeds:
         raise ValueError(f"seed {seed} not in this run (it has seeds 0..{config.seeds - 1})")
-    k_index = 0 if k is None else _index_of(config.k, k)
+    k_index = point_index(config, k, at)
     trainer = Trainer(config)
     like = jax.eval_shape(trainer.init_batch)
     state = run.restore_final(like)
@@ -45,8 +46,24 @@ def load_policy(
     return act
 
 
-def _index_of(values: tuple[float, ...], k: float) -> int:
-    for i, value in enumerate(values):
-        if np.isclose(value, k):
-            return i
-    raise ValueError(f"K={k} not in this run (it has K in {list(values)})")
+def point_index(config, k: float | None = None, at: dict | None = None) -> int:
+    """The index into `config.points` of K `k` (None: the first) and the sweep values `at`
+    (a field left out: its first value); ValueError naming the valid values."""
+    wanted = {"k": config.k[0] if k is None else _value_of(config.k, k, "K")}
+    swept = dict(config.sweep)
+    for name, value in (at or {}).items():
+        if name not in swept:
+            raise ValueError(
+                f"{name} is not swept in this run (swept: {', '.join(swept) or 'none'})"
+            )
+        wanted[name] = _value_of(swept[name], value, name)
+    for name, values in config.sweep:
+        wanted.setdefault(name, values[0])
+    return next(i for i, p in enumerate(config.points) if p == wanted)
+
+
+def _value_of(values: tuple[float, ...], value: float, name: str) -> float:
+    for candidate in values:
+        if np.isclose(candidate, value):
+            return candidate
+    raise ValueError(f"{name}={value} not in this run (it has {name} in {list(values)})")

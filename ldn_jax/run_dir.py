@@ -203,15 +203,16 @@ class RunDir:
         return json.loads(self.summary_file.read_text())
 
     def record_eval(self, header: dict, result: dict) -> None:
-        """Add `result` to eval.json, replacing an earlier evaluation of the same seed and K."""
+        """Add `result` to eval.json, replacing an earlier evaluation of the same seed, K and
+        sweep point."""
         try:
             runs = [
                 r for r in json.loads(self.eval_file.read_text())["runs"] if isinstance(r, dict)
             ]
         except (OSError, ValueError, KeyError, TypeError):
             runs = []  # none yet, or unreadable: start afresh
-        key = (result["seed"], result["k"])
-        runs = [r for r in runs if (r.get("seed"), r.get("k")) != key]
+        key = lambda r: (r.get("seed"), r.get("k"), r.get("sweep"))
+        runs = [r for r in runs if key(r) != key(result)]
         write_json(self.eval_file, {**header, "runs": [*runs, result]})
 
     # -- checkpoints --------------------------------------------------------------------------

@@ -10,6 +10,8 @@ The PPO family (`ppo`, `ppo-model`, `ppo-ldn`) is the same with PPO as the learn
 
 from __future__ import annotations
 
+import copy
+
 import jax
 import jax.numpy as jnp
 from flax import struct
@@ -17,7 +19,7 @@ from jax.sharding import Mesh
 
 import envs
 from ldn_jax.buffer import Buffer, Transitions, buffer_add, buffer_init
-from ldn_jax.config import Config
+from ldn_jax.config import Config, with_values
 from ldn_jax.dynamics import Dynamics, ModelState
 from ldn_jax.imagination import model_world
 from ldn_jax.learners import LEARNERS
@@ -102,6 +104,20 @@ class Trainer:
             if config.algorithm.uses_model
             else None
         )
+
+    def at(self, values: dict[str, Array]) -> Trainer:
+        """This trainer with the float fields `values` (dotted names: a sweep point's
+        values, traced inside the compiled program) set; itself where there are none. The
+        learner and the model are rebuilt on the new values; the env is shared."""
+        if not values:
+            return self
+        other = copy.copy(self)
+        other.config = with_values(self.config, values)
+        learner = LEARNERS[other.config.algorithm.learner]
+        other.learner = learner(other.config.agent, self.obs_size, self.action_spec)
+        if self.dynamics is not None:
+            other.dynamics = Dynamics(other.config.model, self.obs_size, self.model_action_size)
+        return other
 
     # -- state -----------------------------------------------------------------------------
 
@@ -322,12 +338,18 @@ class Trainer:
         )
         return state, metrics
 
-    def train_chunk(self, state: TrainState, gain: Array) -> tuple[TrainState, dict]:
-        """`config.chunk_iterations` iterations; metrics stacked `[N, ...]`. `gain` is this
-        run's learning-degree gain K (eq. 6)."""
+    def train_chunk(self, state: TrainState, point) -> tuple[TrainState, dict]:
+        """`config.chunk_iterations` iterations; metrics stacked `[N, ...]`. `point` is this
+        run's learning-degree gain K (eq. 6), or in a sweep `{"k": K, field: value, ...}`."""
+        trainer, gain = self._at_point(point)
         return jax.lax.scan(
-            lambda s, _: self.iteration(s, gain), state, length=self.config.chunk_iterations
+            lambda s, _: trainer.iteration(s, gain), state, length=self.config.chunk_iterations
         )
+
+    def _at_point(self, point) -> tuple[Trainer, Array]:
+        if not isinstance(point, dict):
+            return self, point
+        return self.at({n: v for n, v in point.items() if n != "k"}), point["k"]
 
     def evaluate(self, state: TrainState, key: Array) -> Array:
         """Mean return of the greedy policy over `config.eval_episodes` real episodes."""
@@ -356,18 +378,32 @@ class Trainer:
     # -- seeds x K -------------------------------------------------------------------------
 
     def init_batch(self) -> TrainState:
-        """States `[K, S]`: seed i gets key i for every K (common random numbers)."""
+        """States `[P, S]` (P: `config.points`, the K values without a sweep): seed i gets
+        key i at every point (common random numbers). In a sweep each point starts from
+        its own values (an optimiser state may hold its learning rate)."""
         keys = jax.vmap(jax.random.key)(jnp.arange(self.config.seeds))
+        if self.config.sweep:
+            init = lambda point: jax.vmap(self._at_point(point)[0].init_state)(keys)
+            return jax.vmap(init)(self.point_values())
         states = jax.vmap(self.init_state)(keys)
         n_k = len(self.config.k)
         return jax.tree.map(lambda x: jnp.broadcast_to(x, (n_k, *x.shape)), states)
 
     def k_values(self) -> Array:
-        """The gains K of `config.k`, `[K]`: the second argument of `batched_chunk`."""
-        return jnp.asarray(self.config.k, jnp.float32)
+        """The gain K of each point, `[P]` (`config.k` without a sweep)."""
+        return jnp.asarray([p["k"] for p in self.config.points], jnp.float32)
+
+    def point_values(self):
+        """The second argument of `batched_chunk`: `k_values()` without a sweep; in a sweep
+        `{"k": [P], field: [P], ...}`, each point's K and values."""
+        if not self.config.sweep:
+            return self.k_values()
+        points = self.config.points
+        return {name: jnp.asarray([p[name] for p in points], jnp.float32) for name in points[0]}
 
     def batched_chunk(self, mesh: Mesh | None = None, bitwise: bool = False):
-        """`(states [K, S], k [K]) -> (states, metrics [K, S, N, ...])`, jitted.
+        """`(states [P, S], point_values()) -> (states, metrics [P, S, N, ...])`, jitted (P:
+        the points, the K values without a sweep).
 
         With a mesh, each of its devices runs its block of seeds (`ldn_jax.sharding`);
         states must then be placed with `sharding.place` and k with `sharding.replicate`.

@@ -65,7 +65,8 @@ def training_reward(segment: Segment, config: AgentConfig) -> Array:
     reward = segment.reward
     if config.terminal_reward is not None:
         reward = jnp.where(segment.terminated, config.terminal_reward, reward)
-    return reward if config.reward_scale == 1.0 else reward * config.reward_scale
+    scale = config.reward_scale  # a traced array in a sweep
+    return reward if isinstance(scale, float) and scale == 1.0 else reward * scale
 
 
 def worker_mean(x: Array, weight: Array) -> Array:
