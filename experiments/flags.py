@@ -275,8 +275,10 @@ def requested(args: argparse.Namespace) -> tuple[str | None, dict[str, tuple[obj
         where = " ".join(f"--sweep {item}" for item in args.sweep)
         given["sweep"] = (tuple(parse_sweep(item) for item in args.sweep), where)
     if "steps" in given and "episodes" in given:
+        named = lambda where: where if where.startswith("--set") else where.split()[0]
         raise UsageError(
-            f"give {given['steps'][1]} or {given['episodes'][1]}, not both (one budget per run)"
+            f"give {named(given['steps'][1])} or {named(given['episodes'][1])}, not both "
+            "(one budget per run)"
         )
     if "episodes" in given and "steps" not in given:
         settings.pop("steps", None)  # a budget in episodes replaces the file's in steps

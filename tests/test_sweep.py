@@ -37,16 +37,6 @@ def _metrics(config, chunks: int = 2) -> dict[str, np.ndarray]:
     return {name: np.concatenate([m[name] for m in out], axis=2) for name in out[0]}
 
 
-@pytest.fixture(scope="module", autouse=True)
-def compile_cache(tmp_path_factory):
-    """A persistent compilation cache for this module's in-process runs: a resumed run
-    compiles the program its reference already compiled."""
-    previous = jax.config.jax_compilation_cache_dir
-    jax.config.update("jax_compilation_cache_dir", str(tmp_path_factory.mktemp("jax-cache")))
-    yield
-    jax.config.update("jax_compilation_cache_dir", previous)
-
-
 SLOW = pytest.mark.slow
 PPO_GRID = (("agent.actor_lr", (7.5e-4, 3e-3)),)
 
@@ -178,6 +168,7 @@ def test_a_sweep_run_names_its_points_in_every_file(sweep_run):
     assert "K=2 agent.actor_lr=0.0003" in "\n".join(render(table, []))
 
 
+@SLOW  # 18 s; the default suite keeps resume's own tests (tests/test_resume.py)
 def test_a_sweep_resumes_to_the_bit(sweep_run, tmp_path):
     ref_dir, ref_summary = sweep_run
     config = read_run_config(ref_dir)
@@ -190,6 +181,7 @@ def test_a_sweep_resumes_to_the_bit(sweep_run, tmp_path):
     assert _timeless(summary) == _timeless(ref_summary)
 
 
+@SLOW  # 25 s; the default suite keeps the device tests of tests/test_scale.py
 def test_a_sweep_over_two_devices_gives_the_one_device_run(sweep_run, tmp_path):
     ref_dir, _ = sweep_run
     env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2")
