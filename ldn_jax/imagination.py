@@ -27,6 +27,7 @@ from ldn_jax.learning_degree import (
     relative_disagreement,
     stop_draw,
     stop_probability,
+    windowed,
 )
 from ldn_jax.rollout import WorldStep
 
@@ -52,12 +53,19 @@ def model_world(
     observation dimension dominates it by its units; so is an ensemble's disagreement.
     A prediction outside the real data's box (`ModelConfig.support`) stops the episode as
     the LD draw does; extras then carry `outside`, the steps it stopped that way.
-    """
-    estimate = LD_ESTIMATES[dynamics.config.ld]
 
-    def step(key: Array, world: None, obs: Array, action: Array):
+    The world's state is the window of the last `ld_window - 1` deviations of each worker's
+    episode (`ld_history`; None for a window of 1), zeros at an episode's start. The
+    deviation is scaled by `ld_scale` before the window and K.
+    """
+    estimate, degree = LD_ESTIMATES[dynamics.config.ld]
+    scale = dynamics.config.ld_scale
+
+    def step(key: Array, world: Array | None, obs: Array, action: Array):
         encoded = model_action(action)
-        predicted, ld, p_stop = estimate(dynamics, model, obs, encoded, gain)
+        predicted, statistic = estimate(dynamics, model, obs, encoded)
+        statistic, world = windowed(scale * statistic, world)
+        ld, p_stop = degree(statistic, gain)
         next_obs, reward = dynamics.denormalize(model.stats, *predicted)
         if env_reward is not None:
             reward = env_reward(obs, action, next_obs)
@@ -72,30 +80,48 @@ def model_world(
     return step
 
 
-def _m0_estimate(dynamics: Dynamics, model: ModelState, obs: Array, action: Array, gain: Array):
-    """M1's normalised prediction, and LD and P(stop) of M1 vs M0 (eq. 3-6)."""
+def ld_history(dynamics: Dynamics, workers: int) -> Array | None:
+    """The model world's state at an episode's start: `ld_window - 1` zeros per worker (no
+    steps taken yet), or None for a window of 1."""
+    window = dynamics.config.ld_window
+    return None if window == 1 else jnp.zeros((workers, window - 1), jnp.float32)
+
+
+def _m0_estimate(dynamics: Dynamics, model: ModelState, obs: Array, action: Array):
+    """M1's normalised prediction, and eq. 3's sigma2 of M1 vs M0."""
     m1 = dynamics.predict_normalized(model.params, model.stats, obs, action)
     m0 = dynamics.predict_normalized(model.frozen, model.stats, obs, action)
-    sigma2 = deviation(_joined(*m1), _joined(*m0))
-    return m1, learning_degree(sigma2, gain), stop_probability(sigma2, gain)
+    return m1, deviation(_joined(*m1), _joined(*m0), dynamics.config.ld_reduce)
 
 
-def _ensemble_estimate(
-    dynamics: Dynamics, model: ModelState, obs: Array, action: Array, gain: Array
-):
-    """The members' mean normalised prediction, and LD and P(stop) of their disagreement
-    relative to their fit error."""
+def _m0_degree(sigma2: Array, gain: Array):
+    """LD and P(stop) of eq. 4-6."""
+    return learning_degree(sigma2, gain), stop_probability(sigma2, gain)
+
+
+def _ensemble_estimate(dynamics: Dynamics, model: ModelState, obs: Array, action: Array):
+    """The members' mean normalised prediction, and their disagreement relative to their
+    fit error."""
     members = _joined(*dynamics.predict_members(model.params, model.stats, obs, action))
     mean = ensemble_mean(members)
-    d_rel = relative_disagreement(disagreement(members), model.error_scale)
+    d = disagreement(members, dynamics.config.ld_reduce)
     predicted = (mean[..., :-1], mean[..., -1])
-    return predicted, ensemble_learning_degree(d_rel, gain), ensemble_stop_probability(d_rel, gain)
+    return predicted, relative_disagreement(d, model.error_scale)
 
 
-LD_ESTIMATES = {"m0": _m0_estimate, "ensemble": _ensemble_estimate}
-"""`ModelConfig.ld` -> `(dynamics, model, obs, action, gain) -> (prediction, LD, P(stop))`:
-the learning-degree estimators, as `LEARNERS` holds the learners. A new estimator is a
-function here and its name in `ldn_jax.config.LD_ESTIMATORS`."""
+def _ensemble_degree(d_rel: Array, gain: Array):
+    return ensemble_learning_degree(d_rel, gain), ensemble_stop_probability(d_rel, gain)
+
+
+LD_ESTIMATES = {
+    "m0": (_m0_estimate, _m0_degree),
+    "ensemble": (_ensemble_estimate, _ensemble_degree),
+}
+"""`ModelConfig.ld` -> `(estimate, degree)`: `estimate(dynamics, model, obs, action) ->
+(prediction, deviation)` and `degree(deviation, gain) -> (LD, P(stop))`, the deviation
+scaled and windowed between them (`model_world`): the learning-degree estimators, as
+`LEARNERS` holds the learners. A new estimator is a pair here and its name in
+`ldn_jax.config.LD_ESTIMATORS`."""
 assert tuple(LD_ESTIMATES) == LD_ESTIMATORS, "estimators and their config names disagree"
 
 

@@ -17,12 +17,26 @@ import jax.numpy as jnp
 Array = jax.Array
 
 
-def deviation(pred_m1: Array, pred_m0: Array) -> Array:
-    """Eq. 3: sigma2 = 1/2 (M1 - M0)^2, reduced by the mean over output dims.
+REDUCE = {"mean": jnp.mean, "sum": jnp.sum}
+"""`ModelConfig.ld_reduce` -> the reduction over output dims."""
+
+
+def deviation(pred_m1: Array, pred_m0: Array, reduce: str = "mean") -> Array:
+    """Eq. 3: sigma2 = 1/2 (M1 - M0)^2, reduced by the mean (or the sum) over output dims.
 
     `[..., D], [..., D] -> [...]`.
     """
-    return 0.5 * jnp.mean(jnp.square(pred_m1 - pred_m0), axis=-1)
+    return 0.5 * REDUCE[reduce](jnp.square(pred_m1 - pred_m0), axis=-1)
+
+
+def windowed(value: Array, history: Array | None) -> tuple[Array, Array | None]:
+    """The sum of `value` and the last B - 1 values of its episode (`history [..., B - 1]`,
+    zeros for steps not taken yet: at the episode start the window holds only the steps so
+    far), and the history with `value` pushed in. `history=None`: a window of 1."""
+    if history is None:
+        return value, None
+    total = value + history.sum(axis=-1)
+    return total, jnp.concatenate([history[..., 1:], value[..., None]], axis=-1)
 
 
 def learning_degree(sigma2: Array, gain: Array | float = 1.0) -> Array:
@@ -61,13 +75,14 @@ def ensemble_mean(members: Array) -> Array:
     return members[0] + jnp.mean(members - members[0], axis=0)
 
 
-def disagreement(members: Array) -> Array:
-    """Eq. 3's form on an ensemble: d = 1/2 the variance over members, mean over output dims.
+def disagreement(members: Array, reduce: str = "mean") -> Array:
+    """Eq. 3's form on an ensemble: d = 1/2 the variance over members, reduced over output
+    dims by the mean (or the sum).
 
     `[E, ..., D] -> [...]`; exactly 0 when all members agree.
     """
     centred = members - ensemble_mean(members)
-    return 0.5 * jnp.mean(jnp.mean(jnp.square(centred), axis=0), axis=-1)
+    return 0.5 * REDUCE[reduce](jnp.mean(jnp.square(centred), axis=0), axis=-1)
 
 
 def relative_disagreement(d: Array, error_scale: Array | float) -> Array:

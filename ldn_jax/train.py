@@ -21,7 +21,7 @@ import envs
 from ldn_jax.buffer import Buffer, Transitions, buffer_add, buffer_init
 from ldn_jax.config import Config, with_values
 from ldn_jax.dynamics import Dynamics, ModelState
-from ldn_jax.imagination import model_world
+from ldn_jax.imagination import ld_history, model_world
 from ldn_jax.learners import LEARNERS
 from ldn_jax.learners.base import LearnerState
 from ldn_jax.learners.ppo import Memory
@@ -198,11 +198,12 @@ class Trainer:
         """Imagined episodes in M1 from fresh initial states (`ModelConfig.imagine`)."""
         k_reset, k_play = jax.random.split(key)
         reset = None
+        history = ld_history(self.dynamics, self.config.workers)  # the LD window's start
         if self.config.model.imagine == "batch":
             starts, _ = self._reset(k_reset, IMAGINED_STARTS * self.config.workers)
             obs = starts[: self.config.workers]
             pick = lambda key: starts[jax.random.randint(key, obs.shape[:1], 0, len(starts))]
-            reset = lambda key: (pick(key), None)
+            reset = lambda key: (pick(key), history)
         else:
             obs, _ = self._reset(k_reset)
         world = model_world(
@@ -223,7 +224,7 @@ class Trainer:
             self.learner,
             world,
             obs,
-            None,
+            history,
             self.max_steps,
             reset=reset,
             learn=not memory,
