@@ -58,7 +58,8 @@ def evaluate(argv: list[str]) -> int:
         args = p.parse_args(argv)
         config, act, k, point = _load(args)
         env = gym_eval.make_env(config.env, render_mode="rgb_array" if args.video else None)
-        returns = _episode_returns(env, act, args, k)
+        name = f"seed{args.seed}_k{k:g}" + "".join(f"_{n}={v:g}" for n, v in point.items())
+        returns = _episode_returns(env, act, args, name)
     except (UsageError, ValueError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
@@ -116,10 +117,11 @@ def _load(args: argparse.Namespace):
     return config, act, values.pop("k"), values
 
 
-def _episode_returns(env: gymnasium.Env, act, args: argparse.Namespace, k: float) -> np.ndarray:
+def _episode_returns(env: gymnasium.Env, act, args: argparse.Namespace, name: str) -> np.ndarray:
+    """The returns of `args.episodes` episodes; with `--video`, recorded under `name`."""
     try:
         if args.video:
-            env = gym_eval.record_video(env, args.video, f"seed{args.seed}_k{k:g}")
+            env = gym_eval.record_video(env, args.video, name)
         try:
             return gym_eval.episode_returns(env, act, args.episodes, args.env_seed)
         finally:
