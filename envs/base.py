@@ -66,6 +66,11 @@ class Env(Protocol):
         ...
 
 
+# Optional: `from_observation(obs, params) -> state`, the state an observation is of, for envs
+# whose observation is their whole state (CartPole). The oracle stop steps the real env
+# from imagined observations with it; envs without it refuse that rule.
+
+
 class ActionSpec(Protocol):
     discrete: bool
     size: int

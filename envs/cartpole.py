@@ -51,6 +51,8 @@ class EnvState:
 class DiscreteActions:
     size: int
     discrete: bool = True
+    forces: tuple[float, ...] = ()
+    """The force each action index applies (a model can take actions as forces)."""
 
 
 def is_terminal(obs: Array) -> Array:
@@ -118,4 +120,11 @@ class CartPole:
         return 4
 
     def action_spec(self, params: EnvParams) -> DiscreteActions:
-        return DiscreteActions(size=len(params.forces))
+        return DiscreteActions(size=len(params.forces), forces=tuple(params.forces))
+
+    def from_observation(self, obs: Array, params: EnvParams) -> EnvState:
+        """The state whose observation is `obs [4]` (CartPole's observation is its physics),
+        at time 0: the real env stepped from an imagined state (the oracle stop, the
+        calibration's one-step error)."""
+        del params
+        return EnvState(physics=obs, time=jnp.zeros((), jnp.int32))

@@ -29,11 +29,13 @@ from pathlib import Path
 import envs
 from experiments.loggers import LOGGERS
 from ldn_jax.config import (
+    ACTION_ENCODINGS,
     ALGORITHMS,
     IMAGINE_MODES,
     LD_ESTIMATORS,
     PRESETS,
     SECTIONS,
+    STOP_RULES,
     Config,
     FieldType,
     fields,
@@ -82,6 +84,11 @@ CONFIG_FLAGS = {
     "ensemble_size": "model.ensemble",
     "imagine": "model.imagine",
     "support": "model.support",
+    "stop": "model.stop",
+    "horizon": "model.horizon",
+    "m2ac_keep": "model.m2ac_keep",
+    "oracle_error": "model.oracle_error",
+    "action_encoding": "model.action_encoding",
 }
 """CLI flag (its argparse name) -> the config field it sets: short names for a few fields of
 `fields()` (`model.X`: a `ModelConfig` field); every field also takes `--set` and `--config`."""
@@ -143,6 +150,41 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="stop an imagined episode where M1 predicts an observation outside the box of "
         "real ones, widened by FRACTION of its width each side; none: never (default: 0.1 "
         "for MuJoCo tasks, none for CartPole)",
+    )
+    m = d.model
+    p.add_argument(
+        "--stop",
+        choices=STOP_RULES,
+        help="what ends an imagined episode early: ld (the learning-degree draw, MBRL-LDN; "
+        "--ld picks its estimator), m2ac (keep the --m2ac-keep share of running rollouts the "
+        "ensemble is surest of, each step), horizon (cut after --horizon steps, MBPO), oracle "
+        "(stop where the true one-step error exceeds --oracle-error; CartPole) or none "
+        "(A3C-Model) (default: ld for ldn and ppo-ldn, none for a2c-model and ppo-model)",
+    )
+    p.add_argument(
+        "--horizon",
+        type=int,
+        metavar="H",
+        help=f"--stop horizon: imagined steps per episode (default {m.horizon})",
+    )
+    p.add_argument(
+        "--m2ac-keep",
+        type=float,
+        metavar="Q",
+        help=f"--stop m2ac: share of running rollouts kept each step (default {m.m2ac_keep})",
+    )
+    p.add_argument(
+        "--oracle-error",
+        type=float,
+        metavar="E",
+        help="--stop oracle: the largest true one-step error (L2, the observation's units) "
+        f"that goes on (default {m.oracle_error})",
+    )
+    p.add_argument(
+        "--action-encoding",
+        choices=ACTION_ENCODINGS,
+        help="how the model takes a discrete action: one-hot, index (one number) or force "
+        f"(the force it applies, one number) (default {m.action_encoding})",
     )
     p.add_argument(
         "--config",
@@ -236,8 +278,15 @@ def build_config(args: argparse.Namespace) -> Config:
     """The config the flags describe (defaults for those not given), validated; a MuJoCo
     run's `auto` backend resolved. `UsageError` for anything impossible."""
     preset, settings = requested(args)
-    if args.ensemble_size is not None and settings.get("model.ld", (None,))[0] != "ensemble":
-        raise UsageError("--ensemble-size needs --ld ensemble")
+    setting = lambda name: settings.get(name, (None,))[0]
+    if args.ensemble_size is not None and "ensemble" not in (
+        setting("model.ld"),
+        "ensemble" if setting("model.stop") == "m2ac" else None,
+    ):
+        raise UsageError("--ensemble-size needs --ld ensemble (or --stop m2ac)")
+    for flag, rule in (("horizon", "horizon"), ("m2ac_keep", "m2ac"), ("oracle_error", "oracle")):
+        if getattr(args, flag) is not None and setting("model.stop") != rule:
+            raise UsageError(f"{flag_name(flag)} needs --stop {rule}")
     overrides: dict = {}
     for name, (value, _) in settings.items():
         section, _, sub = name.rpartition(".")

@@ -116,7 +116,7 @@ def shadow_rollouts(
         imagined, real, live, ld_live, ensemble_live, real_live = carry
         k_act, k_stop, k_ensemble, k_env = jax.random.split(key, 4)
         action = trainer.learner.act(state.learner.params, k_act, imagined)
-        onehot = trainer.learner.policy.model_action(action)
+        onehot = trainer.model_action(action)
         predicted = _predict(trainer, state.model.params, imagined, onehot)
         frozen = _predict(trainer, state.model.frozen, imagined, onehot)
         sigma2 = deviation(predicted, frozen)

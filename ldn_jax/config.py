@@ -27,6 +27,15 @@ IMAGINE_MODES = ("episodes", "memory", "batch")
 LD_REDUCTIONS = ("mean", "sum")
 """How eq. 3's square is reduced over the model's outputs (`ModelConfig.ld_reduce`)."""
 
+STOP_RULES = ("ld", "m2ac", "horizon", "oracle", "none")
+"""What ends an imagined episode early (`ModelConfig.stop`; predicted termination and the
+step limit always do): the learning-degree draw (MBRL-LDN), an M2AC-style rank mask on
+ensemble disagreement, a fixed horizon (MBPO's rollout length), an oracle on the true
+one-step error, or nothing (A3C-Model)."""
+
+ACTION_ENCODINGS = ("one-hot", "index", "force")
+"""How the dynamics model takes a discrete action (`ModelConfig.action_encoding`)."""
+
 LD_ESTIMATORS = ("m0", "ensemble")
 """How the learning degree is estimated: M1 against its frozen initial copy M0 (eq. 3-6), or
 the disagreement of an ensemble of models (`ldn_jax.learning_degree`)."""
@@ -139,6 +148,34 @@ class ModelConfig:
     ld_scale: float = 1.0
     """The deviation is multiplied by this before K (eq. 6): a reading's scale, kept apart
     from K so that Figure 9's K in {0.5, 1, 2} keeps its meaning."""
+    stop: str | None = None
+    """What ends an imagined episode early, one of `STOP_RULES` (None: the algorithm's own,
+    "ld" for ldn and ppo-ldn, "none" for a2c-model and ppo-model; `Config.stop_rule`).
+    Every rule ends the episode after the step it judges, as a truncation (the critic
+    bootstraps from the predicted state), as Algorithm 1's LD draw does: rules differ only
+    in when they stop.
+    "ld": stop with probability 1 - LD (eq. 5), LD from `ld`'s estimator and K.
+    "m2ac": at each imagined step, of the rollouts still running only the `m2ac_keep` share
+    the ensemble is most confident about (lowest disagreement, nearest whole count) goes on,
+    in the style of M2AC (Pan et al. 2020); needs `ld` "ensemble".
+    "horizon": every imagined episode is cut after `horizon` steps (MBPO's rollout length).
+    "oracle": stop where the true one-step error, ||M1(s, a) - env(s, a)|| on the next
+    observation with the real env stepped from the imagined state, exceeds `oracle_error`:
+    the ceiling of any estimator (envs whose observation is their state: CartPole).
+    "none": only predicted termination and the step limit (A3C-Model)."""
+    horizon: int = 5
+    """`stop` "horizon": imagined steps per episode (MBPO's h; h in {1, 5, 25} is the study)."""
+    m2ac_keep: float = 0.5
+    """`stop` "m2ac": the share of running imagined rollouts kept at each step."""
+    oracle_error: float = 0.01
+    """`stop` "oracle": the largest true one-step error (L2, the observation's units) that
+    does not stop; about 3 times the median error of an ldn model on cartpole-v2 after 200
+    episodes (0.0036, REPORT.md's calibration)."""
+    action_encoding: str = "one-hot"
+    """How the model takes a discrete action, one of `ACTION_ENCODINGS`: "one-hot" (ours,
+    the default), "index" (the action's index as one number) or "force" (the force it
+    applies, as one number: Table 1 gives CartPole's actions as forces). Continuous actions
+    always go in as the clipped vector."""
     imagine: str = "episodes"
     """How imagined steps reach the learner, one of `IMAGINE_MODES`:
     "episodes": each worker plays one imagined episode and the learner updates on every n
@@ -247,8 +284,6 @@ class Config:
         episodes = preset.get("episodes", DEFAULT_EPISODES.get(env, Config.episodes))
         overrides.setdefault("episodes", episodes)
         overrides.setdefault("chunk_iterations", DEFAULT_CHUNK.get(env, Config.chunk_iterations))
-        gains = tuple(overrides.get("k", Config.k))
-        overrides["k"] = gains if ALGORITHMS.get(algo, ALGORITHMS["ldn"]).ld_stop else gains[:1]
         agent = dict(LEARNER_DEFAULTS[learner]["agent"])
         model = dict(LEARNER_DEFAULTS[learner].get("model", {}))
         if _continuous(env):
@@ -258,6 +293,12 @@ class Config:
         model.update(TASK_MODEL.get(env, {}))
         agent.update({**preset.get("agent", {}), **overrides.pop("agent", {})})
         model.update({**preset.get("model", {}), **overrides.pop("model", {})})
+        algorithm = ALGORITHMS.get(algo, ALGORITHMS["ldn"])
+        stop = model.get("stop") or ("ld" if algorithm.ld_stop else "none")
+        if stop == "m2ac":  # M2AC ranks by ensemble disagreement
+            model.setdefault("ld", "ensemble")
+        gains = tuple(overrides.get("k", Config.k))
+        overrides["k"] = gains if algorithm.uses_model and stop == "ld" else gains[:1]
         top = {key: v for key, v in preset.items() if key not in ("agent", "model", "episodes")}
         return cls(
             preset=name, **top, **overrides, agent=AgentConfig(**agent), model=ModelConfig(**model)
@@ -265,9 +306,19 @@ class Config:
 
     @property
     def uses_k(self) -> bool:
-        """Whether K means anything to this run's algorithm (it stops by the learning degree);
-        only then do K values appear in what the run prints."""
-        return self.algo in ALGORITHMS and ALGORITHMS[self.algo].ld_stop
+        """Whether K means anything to this run (its imagined episodes stop by the
+        learning-degree draw); only then do K values appear in what the run prints."""
+        return self.stop_rule == "ld"
+
+    @property
+    def stop_rule(self) -> str | None:
+        """What ends this run's imagined episodes early (`ModelConfig.stop`, or the
+        algorithm's own); None for a model-free algorithm."""
+        if self.algo not in ALGORITHMS or not ALGORITHMS[self.algo].uses_model:
+            return None
+        if self.model.stop is not None:
+            return self.model.stop
+        return "ld" if ALGORITHMS[self.algo].ld_stop else "none"
 
     @property
     def algorithm(self) -> Algorithm:
@@ -666,6 +717,17 @@ def validate(config: Config) -> Config:
             f"unknown ld {config.model.ld!r}; valid: {', '.join(LD_ESTIMATORS)}",
         ),
         (config.model.ensemble >= 2, f"ensemble size must be >= 2, got {config.model.ensemble}"),
+        *_stop_checks(config),
+        (
+            config.model.action_encoding in ACTION_ENCODINGS,
+            f"unknown action_encoding {config.model.action_encoding!r}; valid: "
+            + ", ".join(ACTION_ENCODINGS),
+        ),
+        (
+            config.model.action_encoding == "one-hot" or not _continuous(config.env),
+            "action_encoding is for discrete actions; continuous ones go to the model as "
+            "the clipped vector",
+        ),
         (
             config.model.imagine in IMAGINE_MODES,
             f"unknown imagine {config.model.imagine!r}; valid: {', '.join(IMAGINE_MODES)}",
@@ -680,6 +742,58 @@ def validate(config: Config) -> Config:
             raise ValueError(message)
     _validate_sweep(config)
     return config
+
+
+def _stop_checks(config: Config) -> list[tuple[bool, str]]:
+    """The checks of `ModelConfig.stop` and its parameters."""
+    stop, model = config.model.stop, config.model
+    if stop is None:
+        return []
+    if stop not in STOP_RULES:
+        return [(False, f"unknown stop {stop!r}; valid: {', '.join(STOP_RULES)}")]
+    algorithm = ALGORITHMS.get(config.algo)
+    learner = algorithm.learner if algorithm else "a2c"
+    model_based = {"a2c": "a2c-model or ldn", "ppo": "ppo-model or ppo-ldn"}[learner]
+    return [
+        (
+            algorithm is None or algorithm.uses_model,
+            f"stop {stop!r} ends imagined episodes, and {config.algo} imagines none; use "
+            f"--algo {model_based}",
+        ),
+        (
+            algorithm is None or not (algorithm.ld_stop and stop == "none"),
+            f"{config.algo} with stop 'none' is {learner}-model; use --algo {learner}-model",
+        ),
+        (
+            algorithm is None or algorithm.ld_stop or stop != "ld",
+            f"{config.algo} with stop 'ld' is {'ldn' if learner == 'a2c' else 'ppo-ldn'}; "
+            f"use --algo {'ldn' if learner == 'a2c' else 'ppo-ldn'}",
+        ),
+        (
+            stop != "m2ac" or model.ld == "ensemble",
+            "stop 'm2ac' ranks imagined rollouts by ensemble disagreement: it needs ld "
+            "'ensemble' (its default)",
+        ),
+        (model.horizon >= 1, f"horizon must be >= 1, got {model.horizon}"),
+        (0 < model.m2ac_keep <= 1, f"m2ac_keep must be in (0, 1], got {model.m2ac_keep}"),
+        (
+            model.oracle_error > 0 and math.isfinite(model.oracle_error),
+            f"oracle_error must be > 0 and finite, got {model.oracle_error}",
+        ),
+        (
+            stop != "oracle" or _observes_state(config.env),
+            f"stop 'oracle' steps the real env from imagined observations, and {config.env}'s "
+            "observation is not its whole state (CartPole's is)",
+        ),
+    ]
+
+
+def _observes_state(env: str) -> bool:
+    """Whether the env can be stepped from an observation (`Env.from_observation`)."""
+    if env not in envs.names():
+        return True  # `validate` reports the unknown name
+    env_obj, _ = envs.make(env)
+    return hasattr(env_obj, "from_observation")
 
 
 def _validate_sweep(config: Config) -> None:

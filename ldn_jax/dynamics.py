@@ -53,6 +53,21 @@ class ModelState:
     refreshed before each fit and widened by `support`; unbounded until the first fit."""
 
 
+def action_encoder(encoding: str, policy, action_spec) -> tuple:
+    """How the model takes the policy's actions (`ModelConfig.action_encoding`): `(encode,
+    size)`, `encode(action [...]) -> [..., size]`. Discrete: one-hot, the index as one
+    number, or the force the action applies (the env's `action_spec.forces`); continuous:
+    the clipped vector whatever the encoding."""
+    if not policy.discrete or encoding == "one-hot":
+        return policy.model_action, policy.model_action_size
+    if encoding == "index":
+        return lambda action: action.astype(jnp.float32)[..., None], 1
+    forces = tuple(getattr(action_spec, "forces", ()))
+    if encoding != "force" or not forces:
+        raise ValueError(f"action encoding {encoding!r} is not available for this env")
+    return lambda action: jnp.asarray(forces, jnp.float32)[action][..., None], 1
+
+
 class Dynamics:
     """Pure functions over `ModelState` for one observation/action size; holds no state."""
 

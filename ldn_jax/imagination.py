@@ -1,8 +1,10 @@
-"""Imagined episodes: the agent acts in M1, and the learning degree decides when to stop.
+"""Imagined episodes: the agent acts in M1, and a stopping rule decides when to stop.
 
 Predicted termination (the env's own termination test on M1's predicted observation) ends
-an imagined episode as terminal: no bootstrap. The LD draw ends it as a truncation: the critic
-bootstraps, since the episode itself had not ended.
+an imagined episode as terminal: no bootstrap. A stopping rule (`ModelConfig.stop`: the
+learning-degree draw of MBRL-LDN, an M2AC-style mask, an oracle; `STOP_RULES`) ends it as a
+truncation: the critic bootstraps, since the episode itself had not ended. A fixed horizon
+is the episode's step limit (`imagined_steps_limit`).
 
 With an ensemble (`ModelConfig.ld = "ensemble"`) the world steps the members' mean prediction
 and the LD comes from their disagreement instead of from M1 vs M0.
@@ -10,12 +12,14 @@ and the LD comes from their disagreement instead of from M1 vs M0.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import jax
 import jax.numpy as jnp
+from flax import struct
 
-from ldn_jax.config import LD_ESTIMATORS
+from ldn_jax.config import LD_ESTIMATORS, STOP_RULES, ModelConfig
 from ldn_jax.dynamics import Dynamics, ModelState
 from ldn_jax.learning_degree import (
     deviation,
@@ -41,7 +45,7 @@ def model_world(
     model_action: Any,
     env_reward: Any,
     gain: Array,
-    ld_stop: bool,
+    stop: StopRule,
 ) -> WorldStep:
     """A world that steps M1 (an ensemble: its members' mean prediction). Its extras carry
     each step's learning degree `ld`.
@@ -51,8 +55,9 @@ def model_world(
     model takes it (one-hot, or the clipped vector). The deviation of eq. 3 is taken in the
     model's normalised output space (the raw one when normalisation is off), so no
     observation dimension dominates it by its units; so is an ensemble's disagreement.
-    A prediction outside the real data's box (`ModelConfig.support`) stops the episode as
-    the LD draw does; extras then carry `outside`, the steps it stopped that way.
+    `stop` is the stopping rule (`stop_rule`). A prediction outside the real data's box
+    (`ModelConfig.support`) stops the episode as a rule does; extras then carry `outside`,
+    the steps it stopped that way.
 
     The world's state is the window of the last `ld_window - 1` deviations of each worker's
     episode (`ld_history`; None for a window of 1), zeros at an episode's start. The
@@ -61,7 +66,7 @@ def model_world(
     estimate, degree = LD_ESTIMATES[dynamics.config.ld]
     scale = dynamics.config.ld_scale
 
-    def step(key: Array, world: Array | None, obs: Array, action: Array):
+    def step(key: Array, world: Array | None, obs: Array, action: Array, alive: Array):
         encoded = model_action(action)
         predicted, statistic = estimate(dynamics, model, obs, encoded)
         statistic, world = windowed(scale * statistic, world)
@@ -69,15 +74,86 @@ def model_world(
         next_obs, reward = dynamics.denormalize(model.stats, *predicted)
         if env_reward is not None:
             reward = env_reward(obs, action, next_obs)
-        stop = stop_draw(key, p_stop) if ld_stop else jnp.zeros_like(ld, bool)
+        view = StepView(obs, action, next_obs, p_stop, statistic, alive)
+        ends = stop(key, view)
         outside = ~dynamics.within_bounds(model, next_obs)
         terminated = is_terminal(next_obs)
         extras = {"ld": ld}
         if model.bounds is not None:
             extras["outside"] = outside & ~terminated
-        return next_obs, world, reward, terminated, stop | outside, extras
+        return next_obs, world, reward, terminated, ends | outside, extras
 
     return step
+
+
+@struct.dataclass
+class StepView:
+    """What a stopping rule sees of one imagined step of W workers, each field `[W, ...]`."""
+
+    obs: Array
+    action: Array
+    """The action the env would execute (continuous: clipped)."""
+    next_obs: Array
+    """The model's predicted next observation, in the env's units."""
+    p_stop: Array
+    """The learning degree's stop probability 1 - LD (eq. 5)."""
+    statistic: Array
+    """The estimator's deviation after scale and window: eq. 3's sigma2 (`ld` "m0"), or
+    the ensemble's disagreement relative to its fit error (`ld` "ensemble")."""
+    alive: Array
+    """Which workers' imagined episodes are still running (bool)."""
+
+
+StopRule = Callable[[Array, StepView], Array]
+"""`(key, step) -> stop [W]` bool: end the episode after this step (a truncation)."""
+
+
+def stop_rule(config: ModelConfig, name: str, true_next: Callable | None = None) -> StopRule:
+    """The rule `name` (one of `STOP_RULES`) with `config`'s parameters. `true_next(key,
+    obs, action) -> next_obs`: the real env stepped from imagined observations, needed
+    by "oracle" only. "horizon" stops nothing here: its cut is the episode's step limit
+    (`imagined_steps_limit`)."""
+    if name == "ld":
+        return lambda key, step: stop_draw(key, step.p_stop)
+    if name in ("none", "horizon"):
+        return lambda key, step: jnp.zeros(step.alive.shape, bool)
+    if name == "m2ac":
+        keep = config.m2ac_keep
+        return lambda key, step: step.alive & ~m2ac_kept(step.statistic, step.alive, keep)
+    if name == "oracle":
+        if true_next is None:
+            raise ValueError("the oracle stop needs the real env's step (true_next)")
+        threshold = config.oracle_error
+
+        def oracle(key: Array, step: StepView) -> Array:
+            truth = true_next(key, step.obs, step.action)
+            return oracle_error(step.next_obs, truth) > threshold
+
+        return oracle
+    raise ValueError(f"unknown stop rule {name!r}; valid: {', '.join(STOP_RULES)}")
+
+
+def m2ac_kept(score: Array, alive: Array, keep: Array | float) -> Array:
+    """The running rollouts (`alive [W]`) an M2AC-style mask keeps: the keep x n of the n
+    running ones with the lowest `score [W]` (ties: the lower worker index), to the nearest
+    whole count with halves down, so a last rollout is kept only where keep > 1/2: none
+    imagines on however unsure the ensemble. `[W] bool`."""
+    running = alive.sum()
+    count = jnp.ceil(keep * running - 0.5)
+    ranks = jnp.argsort(jnp.argsort(jnp.where(alive, score, jnp.inf), stable=True), stable=True)
+    return alive & (ranks < count)
+
+
+def oracle_error(predicted: Array, truth: Array) -> Array:
+    """The one-step error the oracle reads: ||predicted - truth|| over the observation,
+    `[..., D] x2 -> [...]` (the calibration's `one_step_error`)."""
+    return jnp.linalg.norm(predicted - truth, axis=-1)
+
+
+def imagined_steps_limit(config: ModelConfig, name: str, max_steps: int) -> int:
+    """The step limit of an imagined episode: the env's, or under "horizon" at most
+    `config.horizon`."""
+    return min(max_steps, config.horizon) if name == "horizon" else max_steps
 
 
 def ld_history(dynamics: Dynamics, workers: int) -> Array | None:

@@ -21,10 +21,14 @@ from ldn_jax.learners.base import LearnerState, Segment
 
 Array = jax.Array
 
-WorldStep = Callable[[Array, Any, Array, Array], tuple[Array, Any, Array, Array, Array, dict]]
-"""`(key, world_state, obs [W, d], action [W] or [W, a]) -> (next_obs, world_state,
-reward [W], terminated [W], truncated [W], extras {name: [W]})`. The action is the one the
-env executes (continuous actions clipped to the bounds); segments keep the policy's sample."""
+WorldStep = Callable[
+    [Array, Any, Array, Array, Array], tuple[Array, Any, Array, Array, Array, dict]
+]
+"""`(key, world_state, obs [W, d], action [W] or [W, a], alive [W]) -> (next_obs,
+world_state, reward [W], terminated [W], truncated [W], extras {name: [W]})`. The action is
+the one the env executes (continuous actions clipped to the bounds); segments keep the
+policy's sample. `alive` says which workers' steps count (a rule ranking the running
+imagined rollouts reads it); a world may ignore it."""
 
 
 @struct.dataclass
@@ -119,7 +123,7 @@ def play_episodes(
         if reset is not None:
             k_world, k_reset = jax.random.split(k_world)
         next_obs, world, reward, terminated, truncated, extras = world_step(
-            k_world, carry.world, carry.obs, learner.env_action(action)
+            k_world, carry.world, carry.obs, learner.env_action(action), carry.alive
         )
         truncated = (truncated | (carry.time + 1 >= max_steps)) & ~terminated
         done = terminated | truncated

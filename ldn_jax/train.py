@@ -20,8 +20,8 @@ from jax.sharding import Mesh
 import envs
 from ldn_jax.buffer import Buffer, Transitions, buffer_add, buffer_init
 from ldn_jax.config import Config, with_values
-from ldn_jax.dynamics import Dynamics, ModelState
-from ldn_jax.imagination import ld_history, model_world
+from ldn_jax.dynamics import Dynamics, ModelState, action_encoder
+from ldn_jax.imagination import imagined_steps_limit, ld_history, model_world, stop_rule
 from ldn_jax.learners import LEARNERS
 from ldn_jax.learners.base import LearnerState
 from ldn_jax.learners.ppo import Memory
@@ -98,7 +98,9 @@ class Trainer:
         self.max_steps = self.env_params.max_steps
         learner = LEARNERS[config.algorithm.learner]
         self.learner = learner(config.agent, self.obs_size, self.action_spec)
-        self.model_action_size = self.learner.policy.model_action_size
+        self.model_action, self.model_action_size = action_encoder(
+            config.model.action_encoding, self.learner.policy, self.action_spec
+        )
         self.dynamics = (
             Dynamics(config.model, self.obs_size, self.model_action_size)
             if config.algorithm.uses_model
@@ -154,7 +156,8 @@ class Trainer:
         keys = jax.random.split(key, count or self.config.workers)
         return jax.vmap(self.env.reset, (0, None))(keys, self.env_params)
 
-    def _env_world(self, key: Array, world, obs: Array, action: Array):
+    def _env_world(self, key: Array, world, obs: Array, action: Array, alive: Array):
+        del alive  # every worker steps; the mask decides what counts
         keys = jax.random.split(key, action.shape[0])
         step = jax.vmap(self.env.step, (0, 0, 0, None))
         next_obs, world, reward, terminated, truncated, _ = step(
@@ -184,7 +187,7 @@ class Trainer:
         flat = lambda x: x.reshape((-1, *x.shape[2:]))
         batch = Transitions(
             obs=flat(steps.obs),
-            action=flat(self.learner.policy.model_action(steps.action)),
+            action=flat(self.model_action(steps.action)),
             next_obs=flat(steps.next_obs),
             reward=flat(steps.reward),
         )
@@ -206,14 +209,15 @@ class Trainer:
             reset = lambda key: (pick(key), history)
         else:
             obs, _ = self._reset(k_reset)
+        rule = self.config.stop_rule
         world = model_world(
             self.dynamics,
             state.model,
             lambda o: self.env.is_terminal(o, self.env_params),
-            self.learner.policy.model_action,
+            self.model_action,
             self._env_reward(),
             gain,
-            self.config.algorithm.ld_stop,
+            stop_rule(self.config.model, rule, self._true_next if rule == "oracle" else None),
         )
         memory = self.config.model.imagine == "memory"
         if memory:
@@ -225,7 +229,7 @@ class Trainer:
             world,
             obs,
             history,
-            self.max_steps,
+            imagined_steps_limit(self.config.model, rule, self.max_steps),
             reset=reset,
             learn=not memory,
         )
@@ -235,6 +239,13 @@ class Trainer:
             )
             state, episodes = state.replace(memory=state_memory), episodes.replace(losses=losses)
         return state.replace(learner=learner), episodes
+
+    def _true_next(self, key: Array, obs: Array, action: Array) -> Array:
+        """The real env's next observations from imagined ones, `[W, d]` (the oracle stop)."""
+        states = jax.vmap(self.env.from_observation, (0, None))(obs, self.env_params)
+        keys = jax.random.split(key, obs.shape[0])
+        step = jax.vmap(self.env.step, (0, 0, 0, None))
+        return step(keys, states, action, self.env_params)[0]
 
     def _env_reward(self):
         """The env's exact reward `(obs, action, next_obs) -> [...]`, if used and known."""

@@ -16,7 +16,7 @@ from ldn_jax import checkpoint, load_policy
 from ldn_jax.buffer import buffer_add, buffer_init
 from ldn_jax.config import AgentConfig, Config, ModelConfig, from_preset, validate
 from ldn_jax.dynamics import Dynamics, ModelState
-from ldn_jax.imagination import model_world
+from ldn_jax.imagination import model_world, stop_rule
 from ldn_jax.learners.a2c import A2C
 from ldn_jax.learning_degree import (
     ERROR_FLOOR,
@@ -157,14 +157,16 @@ def _world(members_equal: bool, ld_stop: bool, error_scale: float):
     model = model.replace(error_scale=jnp.float32(error_scale))
     never_terminal = lambda obs: jnp.zeros(obs.shape[:-1], bool)
     encode = lambda a: jax.nn.one_hot(a, 2)
-    world = model_world(dynamics, model, never_terminal, encode, None, jnp.float32(1.0), ld_stop)
+    gain = jnp.float32(1.0)
+    world = model_world(dynamics, model, never_terminal, encode, None, gain, _rule(ld_stop))
     return dynamics, model, world
 
 
 def _one_step(world, workers=256):
     obs = jax.random.uniform(jax.random.key(6), (workers, 4), minval=-0.05, maxval=0.05)
     action = jnp.arange(workers) % 2
-    return obs, action, jax.jit(world)(jax.random.key(7), None, obs, action)
+    alive = jnp.ones(workers, bool)
+    return obs, action, jax.jit(world)(jax.random.key(7), None, obs, action, alive)
 
 
 def test_equal_members_never_stop_and_step_as_one_model():
@@ -273,3 +275,8 @@ def test_resume_refuses_a_different_estimator(ensemble_run, flag):
     )
     assert result.returncode == 2 and result.stderr.count("\n") == 1, result.stderr
     assert "does not match the run being resumed" in result.stderr
+
+
+def _rule(ld_stop: bool):
+    """The LD draw (ldn) or no stop (a2c-model)."""
+    return stop_rule(ModelConfig(), "ld" if ld_stop else "none")

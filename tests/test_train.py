@@ -8,7 +8,7 @@ import pytest
 from ldn_jax.buffer import Transitions, buffer_add, buffer_init
 from ldn_jax.config import AgentConfig, ModelConfig, from_preset
 from ldn_jax.dynamics import MIN_WIDTH, Dynamics
-from ldn_jax.imagination import model_world
+from ldn_jax.imagination import model_world, stop_rule
 from ldn_jax.learners.a2c import A2C
 from ldn_jax.rollout import play_episodes
 from ldn_jax.train import Trainer
@@ -18,7 +18,7 @@ def _scripted_world(end_at, terminal):
     """Worker w's episode ends after `end_at[w]` steps, terminated or truncated."""
     end_at, terminal = jnp.asarray(end_at), jnp.asarray(terminal)
 
-    def step(key, time, obs, action):
+    def step(key, time, obs, action, alive):
         time = time + 1
         ends = time >= end_at
         return obs + 1.0, time, jnp.ones_like(obs[:, 0]), ends & terminal, ends & ~terminal, {}
@@ -125,7 +125,8 @@ def _imagine(ld_stop, trained, bounds=None):
     learner = A2C(AgentConfig(), obs_size=4, action_spec=2)
     never_terminal = lambda obs: jnp.zeros(obs.shape[:-1], bool)
     encode = lambda a: jax.nn.one_hot(a, 2)
-    world = model_world(dynamics, model, never_terminal, encode, None, jnp.float32(1.0), ld_stop)
+    gain = jnp.float32(1.0)
+    world = model_world(dynamics, model, never_terminal, encode, None, gain, _rule(ld_stop))
     obs = jax.random.uniform(jax.random.key(2), (64, 4), minval=-0.05, maxval=0.05)
     _, episodes = jax.jit(play_episodes, static_argnums=(2, 3, 6))(
         jax.random.key(3), learner.init(jax.random.key(4)), learner, world, obs, None, 50
@@ -304,3 +305,8 @@ def test_vmapped_seeds_equal_seeds_run_one_by_one():
                 np.testing.assert_allclose(
                     value, chunk[name][0, seed], rtol=1e-5, atol=1e-6, err_msg=name
                 )
+
+
+def _rule(ld_stop: bool):
+    """The LD draw (ldn) or no stop (a2c-model)."""
+    return stop_rule(ModelConfig(), "ld" if ld_stop else "none")
