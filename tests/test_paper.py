@@ -114,9 +114,9 @@ def _json(results: Path, name: str) -> dict:
 def test_smoke_trains_each_run_once_and_reuses_it(smoke):
     results, stdout = smoke
     # Table 2's three runs, Figure 9's two (CartPole and inverted_pendulum), the calibration's
-    # ensemble-LD run, Table 4's two, Table 5's three and the targets' a2c; the other scripts
-    # reuse them.
-    assert stdout.count("training ") == 12, stdout
+    # ensemble-LD run, the stopping-rule study's four (a reading and three rules), Table 4's
+    # two, Table 5's three and the targets' a2c; the other scripts reuse them.
+    assert stdout.count("training ") == 16, stdout
     finished = sorted(p.name for p in (results / "runs" / "smoke").iterdir())
     assert finished == [
         "cartpole-v0-a2c",
@@ -131,7 +131,36 @@ def test_smoke_trains_each_run_once_and_reuses_it(smoke):
         "inverted_pendulum-ppo",
         "inverted_pendulum-ppo-ldn",
         "inverted_pendulum-ppo-model",
+        "stops-cartpole-v0-fig5",
+        "stops-cartpole-v0-horizon-5",
+        "stops-cartpole-v0-m2ac",
+        "stops-cartpole-v0-oracle",
     ]
+
+
+def test_smoke_readings_and_stopping_rules(smoke):
+    results, _ = smoke
+    readings = _json(results, "readings")
+    assert list(readings["readings"]) == ["literal", "fig5", "a3c-model"]
+    for name in ("literal", "fig5"):
+        row = readings["readings"][name]
+        assert row["vs_a3c_model"]["verdict"] in ("helps", "hurts", "no clear difference")
+        assert 0 <= row["ld_mean"] < 1 and row["imagined_per_episode"]["n"] == 2
+    assert (results / "readings" / "readings.png").stat().st_size > 0
+    rules = _json(results, "rules")
+    rows = rules["envs"]["cartpole-v0"]["rows"]
+    # m2ac and the oracle: one vmapped program of three points each
+    labels = [r["label"] for r in rows]
+    assert labels == [
+        "m2ac m2ac_keep=0.5", "m2ac m2ac_keep=0.75", "m2ac m2ac_keep=0.9", "horizon-5",
+        "oracle oracle_error=0.005", "oracle oracle_error=0.01", "oracle oracle_error=0.02",
+        "none",
+    ]  # fmt: skip
+    horizon = rows[labels.index("horizon-5")]
+    assert horizon["imagined_per_episode"]["iqm"] <= 5
+    assert "vs_a3c_model" not in rows[-1] and len(rows[0]["seeds"]["to_threshold"]) == 2
+    assert (results / "rules" / "rules.png").stat().st_size > 0
+    assert (results / "rules" / "rules.csv").read_text().count("\n") == 1 + 8
 
 
 def test_smoke_tables_2_and_3(smoke):
@@ -300,6 +329,8 @@ def test_report_is_generated_from_the_result_files(smoke, tmp_path):
         assert heading in text
     assert "## LD calibration" in text and "## What reproduced and what did not" in text
     assert "## Table 4: MuJoCo" in text and "## Table 5: MuJoCo" in text
+    assert "## The readings of eq. 3" in text and "## Stopping rules for imagination" in text
+    assert "Stopping rules, cartpole-v0, against A3C-Model in episodes to threshold" in text
     assert "346.4 ± 44.5" in text and "625.5" in text  # the paper's numbers beside ours
     assert "10,864.3" in text and "2,175" in text  # Tables 4 and 5 of the paper
     assert "Figure 9, inverted_pendulum: mean final moving return" in text

@@ -3,8 +3,8 @@
     python experiments/paper/all.py [--scale cpu|paper] [--smoke] [--results DIR]
 
 The same as running table2.py, table3.py, figure4.py, figure5.py, figure9.py, calibration.py,
-table4.py, table5.py, targets.py and report.py one after the other with the same flags; one process
-compiles each training program once.
+stops.py, table4.py, table5.py, targets.py and report.py one after the other with the same
+flags; one process compiles each training program once.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from experiments.paper import (
     figure5,
     figure9,
     report,
+    stops,
     table2,
     table3,
     table4,
@@ -28,7 +29,19 @@ from experiments.paper import (
     targets,
 )
 
-SCRIPTS = (table2, table3, figure4, figure5, figure9, calibration, table4, table5, targets, report)
+SCRIPTS = (
+    table2,
+    table3,
+    figure4,
+    figure5,
+    figure9,
+    calibration,
+    stops,
+    table4,
+    table5,
+    targets,
+    report,
+)
 
 
 def main(argv: list[str] | None = None) -> int:

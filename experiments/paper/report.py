@@ -21,7 +21,18 @@ from scipy import stats
 from experiments import stats as iqm_stats
 from experiments.paper import common
 
-NAMES = ("table2", "table3", "figure5", "figure9", "calibration", "table4", "table5", "targets")
+NAMES = (
+    "table2",
+    "table3",
+    "figure5",
+    "figure9",
+    "calibration",
+    "readings",
+    "rules",
+    "table4",
+    "table5",
+    "targets",
+)
 
 
 def load(results: Path) -> dict[str, dict | None]:
@@ -689,6 +700,127 @@ def calibration_findings(data: dict) -> list[str]:
     return findings
 
 
+def _versus(row: dict) -> tuple[str, str]:
+    """P(better than A3C-Model) with its interval and Mann-Whitney's p, and the verdict."""
+    versus = row.get("vs_a3c_model")
+    if versus is None:
+        return "(baseline)", "baseline"
+    p_better = iqm_stats.improvement_text(versus["p_better"])
+    return f"{p_better}, p = {versus['mann_whitney_p']:.2g}", versus["verdict"]
+
+
+VERDICTS = ("helps", "hurts", "no clear difference")
+
+
+def readings_section(data: dict) -> Section:
+    unit = data["unit"].replace("_", " ")
+    intro = (
+        f"{data['env']}, MBRL-LDN, K = 1, {data['seeds']} seeds, {budget(data)} each "
+        "(`experiments/paper/stops.py`). Eq. 3's square (M1 - M0)^2 reduced over the model's "
+        "5 outputs by the mean (the literal reading, the `paper` preset) or the sum, over the "
+        "step's own prediction or a window of the episode's last 10 imagined steps (the "
+        'paper: "the input size is 10 batches"), and the literal reading with the model '
+        "taking actions as forces (Table 1) instead of one-hot. Against A3C-Model (no stop): "
+        "the probability that a seed of the reading reaches the threshold sooner (a seed "
+        "that never does counts as the budget + 1), with its bootstrap 95% interval, and "
+        "the Mann-Whitney p. Figure 5 redrawn for each reading: "
+        "![readings](readings/readings.png)"
+    )
+    header = ["reading", "mean LD", "LD >= 0.9, first 10k imagined steps", "after 10k"]
+    header += ["imagined steps per episode", "reached", f"{unit} to threshold: IQM [95% CI]"]
+    header += ["mean ± s.d.", "vs A3C-Model: P(sooner), p", "verdict"]
+    pct = lambda v: "–" if v is None else f"{100 * v:.1f}%"
+    rows = []
+    for r in data["readings"].values():
+        sooner, verdict = _versus(r)
+        t = r["to_threshold"]
+        rows.append(
+            [
+                r["title"],
+                "–" if r["ld_mean"] is None else f"{r['ld_mean']:.3f}",
+                pct(r.get("first_10k_fraction_ld_at_least_0.9")),
+                pct(r.get("after_10k_fraction_ld_at_least_0.9")),
+                iqm(r["imagined_per_episode"], 1),
+                f"{r['reached']}/{r['runs']}",
+                iqm(t),
+                pm(t["mean"], t["sd"], 0),
+                sooner,
+                verdict,
+            ]
+        )
+    findings = []
+    readings = {n: r for n, r in data["readings"].items() if n != "a3c-model"}
+    if readings:
+        near_one = max(readings, key=lambda n: readings[n]["ld_mean"] or 0.0)
+        best = min(readings, key=lambda n: readings[n]["to_threshold"]["iqm"] or float("inf"))
+        base = data["readings"].get("a3c-model")
+        base_text = f"; A3C-Model {iqm(base['to_threshold'])}" if base else ""
+        findings.append(
+            f"Readings of eq. 3 ({data['env']}): mean LD "
+            + ", ".join(f"{r['title']} {r['ld_mean'] or 0:.2f}" for r in readings.values())
+            + f"; the highest under {readings[near_one]['title']}. Fewest {unit} to threshold: "
+            f"{readings[best]['title']}, IQM {iqm(readings[best]['to_threshold'])}{base_text}. "
+            + "Against A3C-Model: "
+            + "; ".join(f"{r['title']} {_versus(r)[1]}" for r in readings.values())
+            + "."
+        )
+    return Section(TITLES["readings"], [intro, Table(header, rows)], findings)
+
+
+def rules_section(data: dict) -> Section:
+    intro = (
+        "Every rule ends an imagined episode after the step it judges, as a truncation (the "
+        "critic bootstraps), as Algorithm 1's LD draw does: rules differ only in when they "
+        "stop (`--stop`, `ldn_jax/imagination.py`). ld: the draw with P(stop) = 1 - LD (the "
+        "literal and the Figure 5 reading of eq. 3, and the ensemble estimator); m2ac: of the "
+        "running imagined rollouts only the `m2ac_keep` share with the lowest ensemble "
+        "disagreement goes on at each step (M2AC's rank mask, Pan et al. 2020; 8 workers make "
+        "a small batch to rank); horizon: cut after h steps (MBPO's rollout length); oracle: "
+        "stop where the true one-step error ||M1(s, a) - env(s, a)|| exceeds a threshold, the "
+        "real env stepped from the imagined state (the ceiling an estimator could reach; "
+        "CartPole only: a MuJoCo observation is not its whole state); none: A3C-Model. The "
+        "M2AC share and the oracle threshold are each one vmapped program over their values. "
+        "K = 1. Verdicts compare each rule with A3C-Model on the steps (MuJoCo) or episodes "
+        "(CartPole) to threshold: helps where the 95% interval of P(sooner) lies above 0.5, "
+        "hurts where it lies below. Seconds to threshold were measured with other jobs on "
+        "the 2 cores: compare them loosely. ![rules](rules/rules.png)"
+    )
+    section = Section(TITLES["rules"], [intro])
+    for env, panel in data["envs"].items():
+        unit = panel["unit"].replace("_", " ")
+        header = ["rule", "reached", f"{unit} to threshold: IQM [95% CI]"]
+        header += ["final moving return", "imagined per real step", "seconds to threshold"]
+        header += ["vs A3C-Model: P(sooner), p", "verdict"]
+        rows, verdicts = [], {}
+        for r in panel["rows"]:
+            if "label" not in r:
+                rows.append([r["title"], r["status"], *["–"] * (len(header) - 2)])
+                continue
+            sooner, verdict = _versus(r)
+            verdicts.setdefault(verdict, []).append(r["label"])
+            rows.append(
+                [
+                    r["label"],
+                    f"{r['reached']}/{r['runs']}",
+                    iqm(r["to_threshold"]),
+                    iqm(r["final_moving_return"]),
+                    iqm(r["imagined_per_real_step"], 3),
+                    iqm(r["seconds_to_threshold"], 1),
+                    sooner,
+                    verdict,
+                ]
+            )
+        size = f"{panel['seeds']} seeds, {panel['budget']:,} {unit.split()[-1]} each"
+        section.blocks += [f"**{env}** ({size}):", Table(header, rows)]
+        named = {v: ", ".join(verdicts.get(v, [])) or "none" for v in VERDICTS}
+        section.findings.append(
+            f"Stopping rules, {env}, against A3C-Model in {unit} to threshold: helps: "
+            f"{named['helps']}; hurts: {named['hurts']}; no clear difference: "
+            f"{named['no clear difference']}."
+        )
+    return section
+
+
 def _pending_note(table: dict) -> list[str]:
     pending = [r for r in table["rows"] if r["status"] != "done"]
     if not pending:
@@ -922,6 +1054,8 @@ SECTIONS = (
     ("figure5", figure5_section),
     ("figure9", figure9_section),
     ("calibration", calibration_section),
+    ("readings", readings_section),
+    ("rules", rules_section),
     ("table4", table4_section),
     ("table5", table5_section),
     ("targets", targets_section),
@@ -935,6 +1069,8 @@ TITLES = {
     "figure5": "Figure 5: learning degree over imagined steps",
     "figure9": "Figure 9: the gain K",
     "calibration": "LD calibration: does the learning degree know when the model is wrong?",
+    "readings": "The readings of eq. 3",
+    "rules": "Stopping rules for imagination, side by side",
     "table4": "Table 4: MuJoCo, A3C-Model vs MBRL-LDN",
     "table5": "Table 5: MuJoCo, PPO2 vs PPO2-Model vs PPO2-LDN",
     "targets": "MuJoCo at the default budgets: the project's targets",
