@@ -60,7 +60,11 @@ def _flip_a_byte(path: Path) -> None:
 # -- a damaged newest checkpoint ---------------------------------------------------------------
 
 
-@pytest.mark.parametrize("damage", [_truncate, _flip_a_byte], ids=["truncated", "flipped byte"])
+@pytest.mark.parametrize(  # truncation: slow (the default suite's time; one damage suffices)
+    "damage",
+    [pytest.param(_truncate, marks=pytest.mark.slow), _flip_a_byte],
+    ids=["truncated", "flipped byte"],
+)
 def test_a_damaged_newest_checkpoint_falls_back_to_the_previous_one(reference, tmp_path, damage):
     ref_dir, ref_summary = reference
     copy = _copy(ref_dir, tmp_path / "copy")

@@ -182,10 +182,11 @@ def test_each_rule_alone_builds_with_its_documented_defaults():
     validate(from_preset("paper", algo="ldn", model={"stop": "oracle"}))
 
 
+@pytest.mark.slow  # the paper smoke (test_paper) trains each rule too, in the default suite
 @pytest.mark.parametrize("rule", ["m2ac", "horizon", "oracle"])
 def test_each_rule_trains_and_counts_its_imagined_steps(rule):
     """A chunk of training under each new rule: the imagined steps counted are those
-    the rule let through (horizon: at most h a episode; m2ac: 4 + 2 + 1 of 8 workers)."""
+    the rule let through (horizon: at most h a episode; m2ac: 8 + 4 + 2 + 1 of 8 workers)."""
     config = validate(
         from_preset(
             "paper", env="cartpole-v1", algo="ldn", seeds=1, workers=8, episodes=16,

@@ -719,8 +719,9 @@ def readings_section(data: dict) -> Section:
         "(`experiments/paper/stops.py`). Eq. 3's square (M1 - M0)^2 reduced over the model's "
         "5 outputs by the mean (the literal reading, the `paper` preset) or the sum, over the "
         "step's own prediction or a window of the episode's last 10 imagined steps (the "
-        'paper: "the input size is 10 batches"), and the literal reading with the model '
-        "taking actions as forces (Table 1) instead of one-hot. Against A3C-Model (no stop): "
+        'paper: "the input size is 10 batches"), or over a batch of 10 samples (the sum '
+        "times 10: `ld_scale`), and the literal reading with the model taking actions as "
+        "forces (Table 1) instead of one-hot. Against A3C-Model (no stop): "
         "the probability that a seed of the reading reaches the threshold sooner (a seed "
         "that never does counts as the budget + 1), with its bootstrap 95% interval, and "
         "the Mann-Whitney p. Figure 5 redrawn for each reading: "
@@ -811,6 +812,8 @@ def rules_section(data: dict) -> Section:
                 ]
             )
         size = f"{panel['seeds']} seeds, {panel['budget']:,} {unit.split()[-1]} each"
+        if panel.get("threshold") is not None:
+            size += f", threshold {panel['threshold']:g} on the moving return"
         section.blocks += [f"**{env}** ({size}):", Table(header, rows)]
         named = {v: ", ".join(verdicts.get(v, [])) or "none" for v in VERDICTS}
         section.findings.append(
