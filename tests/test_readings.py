@@ -45,7 +45,7 @@ def test_readings_are_settings_and_paper_fig5_is_a_preset():
         1.0,
     )
     fig5 = from_preset("paper-fig5")
-    assert (fig5.model.ld_reduce, fig5.model.ld_window) == ("sum", 10)
+    assert (fig5.model.ld_reduce, fig5.model.ld_window, fig5.model.ld_scale) == ("sum", 1, 10.0)
     assert fig5.agent == paper.agent and fig5.k == paper.k  # K keeps its meaning
     for bad, needle in (
         ({"ld_reduce": "max"}, "unknown ld_reduce 'max'"),

@@ -6,10 +6,11 @@ side by side (ours; the paper has neither study).
 Readings (cartpole-v2, MBRL-LDN, K = 1): eq. 3's square reduced by the mean over the 5
 outputs (the literal reading, the `paper` preset), by the sum, the mean over a 10-step
 window, the sum over outputs and window, the sum over outputs and over a batch of 10 samples
-(50 times the literal sigma2: `ld_scale` 10 on the sum), and the literal one with actions
-given to the model as forces. Per reading: mean LD, the share of imagined steps with
-LD >= 0.9 in the first 10k imagined steps and after, imagined steps per episode, episodes to
-threshold against A3C-Model with a Mann-Whitney test, and Figure 5 redrawn.
+(50 times the literal sigma2: `ld_scale` 10 on the sum; the `paper-fig5` preset, the reading
+that matches Figure 5), and the literal one with actions given to the model as forces. Per
+reading: mean LD, the share of imagined steps with LD >= 0.9 in the first 10k imagined steps
+and after, imagined steps per episode, episodes to threshold against A3C-Model with a
+Mann-Whitney test, and Figure 5 redrawn.
 
 Stopping rules (`--stop`; cartpole-v2 and inverted_pendulum): the LD draw (the literal and the
 Figure 5 reading, and the ensemble estimator), the M2AC-style mask and the oracle (each one
@@ -40,22 +41,28 @@ from ldn_jax.config import Config, validate
 from ldn_jax.metrics import threshold_crossing
 
 READINGS = {
-    "literal": ("ldn", {}, "mean over outputs, B = 1 (`paper`)"),
-    "sum": ("ldn", {"ld_reduce": "sum"}, "sum over outputs, B = 1"),
-    "window": ("ldn", {"ld_window": 10}, "mean over outputs, B = 10"),
-    "fig5": ("ldn", {"ld_reduce": "sum", "ld_window": 10}, "sum, B = 10 (`paper-fig5`)"),
+    "literal": ("ldn", {}, "mean over outputs, B = 1 (`paper`)", "mean (paper)"),
+    "sum": ("ldn", {"ld_reduce": "sum"}, "sum over outputs, B = 1", "sum"),
+    "window": ("ldn", {"ld_window": 10}, "mean over outputs, B = 10", "mean, B = 10"),
+    "fig5": (
+        "ldn",
+        {"ld_reduce": "sum", "ld_window": 10},
+        "sum over outputs, B = 10",
+        "sum, B = 10",
+    ),
     "batch": (
         "ldn",
         {"ld_reduce": "sum", "ld_scale": 10.0},
-        "sum over outputs and a 10-sample batch",
+        "sum over outputs and a 10-sample batch (`paper-fig5`)",
+        "sum x 10 samples (paper-fig5)",
     ),
-    "force": ("ldn", {"action_encoding": "force"}, "literal, actions as forces"),
+    "force": ("ldn", {"action_encoding": "force"}, "literal, actions as forces", "forces"),
 }
-"""Reading -> (algo, model fields, how the report names it)."""
+"""Reading -> (algo, model fields, how the report names it, its figure label)."""
 
 RULES = {
     "ld": ("ldn", {}, (), "LD draw, literal reading"),
-    "ld-fig5": ("ldn", {"ld_reduce": "sum", "ld_window": 10}, (), "LD draw, Figure 5 reading"),
+    "ld-fig5": ("ldn", {"ld_reduce": "sum", "ld_scale": 10.0}, (), "LD draw, Figure 5 reading"),
     "ld-ensemble": ("ldn", {"ld": "ensemble"}, (), "LD draw, ensemble disagreement"),
     "m2ac": ("a2c-model", {"stop": "m2ac"}, ("model.m2ac_keep", (0.5, 0.75, 0.9)), "M2AC mask"),
     "horizon-1": ("a2c-model", {"stop": "horizon", "horizon": 1}, (), "horizon h = 1"),
@@ -79,7 +86,7 @@ STUDY_THRESHOLDS = {"inverted_pendulum": 500.0}
 (MuJoCo): at the CPU scale's 300k steps inverted_pendulum's seeds peak at 770-930."""
 
 SMOKE = {"readings": ("literal",), "rules": ("m2ac", "oracle", "none")}
-"""The smoke scale's (tests') share of the study: every code path, on its LD env only."""
+"""The smoke scale's (tests') share of the study: its code paths, on the LD env only."""
 EARLY = figure5.EARLY
 
 
@@ -98,7 +105,7 @@ def dir_of(results: Path, scale: common.Scale, config: Config, name: str) -> Pat
         return plain
     if name == "ld-ensemble":
         return plain
-    name = {"ld-fig5": "fig5"}.get(name, name)  # one run, both studies
+    name = {"ld-fig5": "batch"}.get(name, name)  # one run, both studies
     return results / "runs" / scale.name / f"stops-{config.env}-{name}"
 
 
@@ -225,13 +232,13 @@ def readings_study(results: Path, scale: common.Scale) -> dict:
     baseline = ensure(results, scale, env, "none", *RULES["none"][:2])
     base = _points(baseline)[0]
     rows, histograms = {}, {}
-    for name, (algo, model, title) in _chosen(READINGS, "readings", scale).items():
+    for name, (algo, model, title, label) in _chosen(READINGS, "readings", scale).items():
         entry = ensure(results, scale, env, name, algo, model)
         (point,) = _points(entry)
         rows[name] = {"title": title, "model": model, **_summarise(point, base)}
-        histograms[title] = figure5.histograms(point_history(point))
+        histograms[label] = figure5.histograms(point_history(point))
         for key in ("first_10k_fraction_ld_at_least_0.9", "after_10k_fraction_ld_at_least_0.9"):
-            rows[name][key] = histograms[title][key]
+            rows[name][key] = histograms[label][key]
     rows["a3c-model"] = {"title": "A3C-Model (no stop)", "model": {}, **_summarise(base, None)}
     out = common.out_dir(results, "readings")
     figure5.figure(histograms, env, out / "readings.png")
