@@ -815,7 +815,7 @@ def rules_section(data: dict) -> Section:
         if panel.get("threshold") is not None:
             size += f", threshold {panel['threshold']:g} on the moving return"
         section.blocks += [f"**{env}** ({size}):", Table(header, rows)]
-        named = {v: ", ".join(verdicts.get(v, [])) or "none" for v in VERDICTS}
+        named = {v: ", ".join(verdicts.get(v, [])) or "no rule" for v in VERDICTS}
         section.findings.append(
             f"Stopping rules, {env}, against A3C-Model in {unit} to threshold: helps: "
             f"{named['helps']}; hurts: {named['hurts']}; no clear difference: "

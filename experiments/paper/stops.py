@@ -349,9 +349,14 @@ def rules_figure(record: dict, path: Path) -> None:
                 ax.errorbar(value["iqm"], yi, xerr=[[value["iqm"] - low], [high - value["iqm"]]],
                             fmt="o", color=color, capsize=3)  # fmt: skip
             ax.set_yticks(y, labels, fontsize=8)
+            if metric == "to_threshold" and data["unit"] == "env_steps":
+                ax.xaxis.set_major_formatter(lambda v, _: f"{v / 1000:g}k")
             ax.set_xlabel(f"{xlabel} (IQM, 95% CI)")
             ax.grid(axis="x", alpha=0.3)
-        row_axes[0].set_title(f"{env}: green helps, red hurts against A3C-Model", fontsize=9)
+        row_axes[0].set_title(
+            f"{env}, against A3C-Model: green helps, red hurts, blue no clear difference",
+            fontsize=9,
+        )
     fig.savefig(path)
     plt.close(fig)
 
