@@ -56,16 +56,17 @@ class ShadowSteps:
     N episodes). Steps after an episode's end are kept (masks below say which count)."""
 
     ld: Array
-    """Learning degree of M1 vs M0 (eq. 3-6, the run's K)."""
+    """Learning degree of M1 vs M0 (eq. 3-6, the run's K and reading of eq. 3)."""
     sigma2: Array
-    """Eq. 3's deviation of M1 from M0 (LD before the sigmoid, unsaturated)."""
+    """Eq. 3's deviation of M1 from M0 (LD before the sigmoid, unsaturated), reduced over
+    the outputs and scaled as the run reads it (`model.ld_reduce`, `model.ld_scale`)."""
     sigma2_reward: Array
-    """The reward's term of eq. 3's mean over output dims (sigma2 minus the next state's)."""
+    """The reward's term of sigma2 (sigma2 minus the next state's)."""
     one_step_error: Array
     compounding_error: Array
     disagreement: Array
-    """Ensemble disagreement: 1/2 the variance over members, mean over output dims (eq. 3's
-    form); zero without an ensemble."""
+    """Ensemble disagreement: 1/2 the variance over members, reduced over output dims and
+    scaled as the run reads eq. 3; zero without an ensemble."""
     ensemble_ld: Array
     """The ensemble's learning degree, 2 sigmoid(-K d / error_scale) (one without one)."""
     live: Array
@@ -106,6 +107,14 @@ def shadow_rollouts(
     if trainer.dynamics is None:
         raise ValueError("shadow rollouts need a model-based run (a2c-model, ldn, ...)")
     _check_single_model(trainer)
+    reading = trainer.config.model
+    if reading.ld_window != 1:
+        raise ValueError(
+            "shadow rollouts read each step's own deviation; this run's LD sums a window of "
+            f"{reading.ld_window} steps (model.ld_window)"
+        )
+    scale, reduce = reading.ld_scale, reading.ld_reduce
+    outputs = 1 if reduce == "sum" else trainer.obs_size + 1  # what the reward's term is over
     from_obs = jax.vmap(STATE_FROM_OBS[type(env)])
     step = jax.vmap(env.step, (0, 0, 0, None))
     k_reset, k_play = jax.random.split(key)
@@ -119,8 +128,8 @@ def shadow_rollouts(
         onehot = trainer.model_action(action)
         predicted = _predict(trainer, state.model.params, imagined, onehot)
         frozen = _predict(trainer, state.model.frozen, imagined, onehot)
-        sigma2 = deviation(predicted, frozen)
-        sigma2_reward = 0.5 * jnp.square(predicted[..., -1] - frozen[..., -1]) / frozen.shape[-1]
+        sigma2 = scale * deviation(predicted, frozen, reduce)
+        sigma2_reward = scale * 0.5 * jnp.square(predicted[..., -1] - frozen[..., -1]) / outputs
         stop = stop_draw(k_stop, stop_probability(sigma2, k))
         env_keys = jax.random.split(k_env, episodes)
         true_next = step(env_keys, from_obs(imagined), action, params)[0]
@@ -130,7 +139,7 @@ def shadow_rollouts(
             spread = jnp.zeros_like(sigma2)
         else:
             members = jax.vmap(lambda p: _predict(trainer, p, imagined, onehot))(ensemble)
-            spread = disagreement(members)
+            spread = scale * disagreement(members, reduce)
         p_continue = ensemble_learning_degree(relative_disagreement(spread, error_scale), k)
         ensemble_stop = jax.random.uniform(k_ensemble, p_continue.shape) >= p_continue
         out = ShadowSteps(

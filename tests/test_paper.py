@@ -51,6 +51,33 @@ def test_auc_and_association_by_hand():
     assert cal.association(np.ones(5), np.arange(5.0))["pearson"] is None  # constant score
 
 
+def test_shadow_rollouts_read_eq_3_as_the_run_does():
+    """The calibration's sigma2 is the run's reading: the sum over the 5 outputs, scaled by
+    2, is 10 times the literal mean on the same imagined steps; a window is refused."""
+    readings = {}
+    for reduce, scale in (("mean", 1.0), ("sum", 2.0)):
+        model = {"ld_reduce": reduce, "ld_scale": scale}
+        config = from_preset("paper", env="cartpole-v0", algo="ldn", seeds=1, model=model)
+        trainer = Trainer(config)
+        state = trainer.init_state(jax.random.key(0))
+        state = state.replace(
+            model=state.model.replace(params=jax.tree.map(lambda p: p + 0.01, state.model.params))
+        )
+        readings[reduce] = jax.device_get(
+            jax.jit(cal.shadow_rollouts, static_argnums=(0, 3))(
+                trainer, state, jax.random.key(1), 4, 1.0
+            )
+        )
+    mean, total = readings["mean"], readings["sum"]
+    np.testing.assert_allclose(total.sigma2, 10 * mean.sigma2, rtol=1e-5)
+    np.testing.assert_allclose(total.sigma2_reward, 10 * mean.sigma2_reward, rtol=1e-5)
+    windowed = Trainer(from_preset("paper", env="cartpole-v0", algo="ldn", model={"ld_window": 3}))
+    with pytest.raises(ValueError, match="sums a window of 3 steps"):
+        cal.shadow_rollouts(
+            windowed, windowed.init_state(jax.random.key(0)), jax.random.key(1), 2, 1.0
+        )
+
+
 def test_shadow_rollouts_of_an_untrained_model():
     config = from_preset("paper", env="cartpole-v0", algo="ldn", seeds=1, workers=2)
     trainer = Trainer(config)
