@@ -24,7 +24,6 @@ import numpy as np
 from flax import struct
 from scipy import stats
 
-from envs import cartpole
 from ldn_jax.config import Config
 from ldn_jax.learning_degree import (
     deviation,
@@ -39,15 +38,6 @@ from ldn_jax.run_dir import RunDir
 from ldn_jax.train import Trainer, TrainState
 
 Array = jax.Array
-
-
-def _cartpole_state(obs: Array) -> cartpole.EnvState:
-    return cartpole.EnvState(physics=obs, time=jnp.zeros((), jnp.int32))
-
-
-STATE_FROM_OBS = {cartpole.CartPole: _cartpole_state}
-"""Env type -> `obs [d] -> env state`. The one-step error steps the real env from an imagined
-observation, so it needs envs whose observation is their whole state."""
 
 
 @struct.dataclass
@@ -102,7 +92,7 @@ def shadow_rollouts(
     trained with `--ld ensemble`).
     """
     env, params = trainer.env, trainer.env_params
-    if type(env) not in STATE_FROM_OBS:
+    if not hasattr(env, "from_observation"):  # `envs.base`: the optional method
         raise ValueError(f"shadow rollouts need an env whose observation is its state, not {env}")
     if trainer.dynamics is None:
         raise ValueError("shadow rollouts need a model-based run (a2c-model, ldn, ...)")
@@ -115,7 +105,7 @@ def shadow_rollouts(
         )
     scale, reduce = reading.ld_scale, reading.ld_reduce
     outputs = 1 if reduce == "sum" else trainer.obs_size + 1  # what the reward's term is over
-    from_obs = jax.vmap(STATE_FROM_OBS[type(env)])
+    from_obs = jax.vmap(lambda o: env.from_observation(o, params))
     step = jax.vmap(env.step, (0, 0, 0, None))
     k_reset, k_play = jax.random.split(key)
     obs, real = jax.vmap(env.reset, (0, None))(jax.random.split(k_reset, episodes), params)
