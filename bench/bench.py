@@ -113,10 +113,14 @@ def training(
     workers: int = 8,
     chunk_iterations: int = 5,
     backend: str = "auto",
+    schedule: str = "episodes",
+    steps: int | None = None,
 ) -> dict:
     """Train from scratch (paper preset) and count real and imagined steps per wall second.
 
     The figure covers the whole run, the early iterations with short episodes included.
+    `schedule` "steps" takes a `steps` budget (the real steps of the "episodes" run of the
+    same algorithm, so that both cover the same experience).
     """
     config = from_preset(
         "paper",
@@ -125,9 +129,11 @@ def training(
         seeds=seeds,
         k=(1.0,),
         episodes=episodes,
+        steps=steps,
         workers=workers,
         chunk_iterations=chunk_iterations,
         backend=backend,
+        schedule=schedule,
     )
     trainer = Trainer(config)
     states, k = trainer.init_batch(), trainer.k_values()
@@ -143,18 +149,29 @@ def training(
     imagined = int(states.imagined_steps.sum())
     return {
         "algo": algo,
+        "schedule": schedule,
         "env": env,
         "backend": trainer.env_params.backend if env in envs.mujoco.TASKS else None,
         "seeds": seeds,
         "workers": workers,
         "env_steps": env_steps,
-        "episodes_per_seed": config.iterations * config.workers,
+        "episodes_per_seed": round(int(states.episodes.sum()) / seeds),
         "compile_s": round(compile_s, 2),
         "train_s": round(seconds, 2),
         "env_steps_per_s": round(env_steps / seconds),
         "imagined_steps_per_s": round(imagined / seconds),
         "final_moving_return_mean": round(float(states.moving_return.mean()), 1),
     }
+
+
+def both_schedules(size: dict) -> list[dict]:
+    """`training` of every algorithm under schedule "episodes", then under "steps" over the
+    same real steps per seed."""
+    rows = [training(algo, **size) for algo in ALGOS]
+    for row in list(rows):
+        steps = row["env_steps"] // row["seeds"]
+        rows.append(training(row["algo"], **size, schedule="steps", steps=steps))
+    return rows
 
 
 SWEEP_GRID = (
@@ -346,12 +363,13 @@ def main() -> None:
         ]
     train_size = dict(seeds=2, episodes=160) if args.quick else {}
     if "train" in sections:
-        result["training"] = [training(algo, **train_size) for algo in ALGOS]
-        _add_overheads(result["training"])
+        result["training"] = both_schedules(train_size)
+        for schedule in ("episodes", "steps"):
+            _add_overheads([r for r in result["training"] if r["schedule"] == schedule])
     if "ceiling" in sections:
         size = dict(seeds=2, segments=200) if args.quick else {}
         top = stages.ceiling(**size)
-        rows = result.get("training") or [training(algo, **train_size) for algo in ALGOS]
+        rows = result.get("training") or both_schedules(train_size)
         result["ceiling"] = {**top, "ratios": stages.ratios_to_ceiling(rows, top)}
     if "stages" in sections:
         size = dict(runs=6, warm_episodes=80) if args.quick else {}

@@ -138,6 +138,7 @@ def ratios_to_ceiling(rows: list[dict], ceiling_row: dict) -> list[dict]:
     return [
         {
             "algo": row["algo"],
+            "schedule": row.get("schedule", "episodes"),
             "real_over_ceiling": round(row["env_steps_per_s"] / top, 3),
             "real_plus_imagined_over_ceiling": round(
                 (row["env_steps_per_s"] + row["imagined_steps_per_s"]) / top, 3

@@ -34,6 +34,7 @@ from ldn_jax.config import (
     IMAGINE_MODES,
     LD_ESTIMATORS,
     PRESETS,
+    SCHEDULES,
     SECTIONS,
     STOP_RULES,
     Config,
@@ -76,6 +77,8 @@ CONFIG_FLAGS = {
     "episodes": "episodes",
     "steps": "steps",
     "workers": "workers",
+    "schedule": "schedule",
+    "iteration_steps": "iteration_steps",
     "preset": "preset",
     "threshold": "threshold",
     "chunk": "chunk_iterations",
@@ -119,6 +122,20 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "auto (default: native on CPU, mjx on GPU/TPU)",
     )
     p.add_argument("--workers", type=int, help=f"synchronous workers (default {d.workers})")
+    p.add_argument(
+        "--schedule",
+        choices=SCHEDULES,
+        help="an iteration's real play: episodes (each worker one whole episode, Algorithm 1 "
+        "read literally) or steps (each worker --iteration-steps steps, episodes carrying over "
+        f"between iterations, nothing idle) (default {d.schedule})",
+    )
+    p.add_argument(
+        "--iteration-steps",
+        type=int,
+        metavar="T",
+        help="--schedule steps: real steps per worker per iteration, a multiple of the "
+        "learner's n_steps (default 5 x n_steps)",
+    )
     p.add_argument("--preset", help=f"one of: {', '.join(PRESETS)} (default {d.preset})")
     p.add_argument("--threshold", type=float, help="moving-return threshold")
     p.add_argument(

@@ -12,7 +12,7 @@ from experiments import stats
 from experiments.plots import learning_curves
 from ldn_jax import sharding
 from ldn_jax.config import Config
-from ldn_jax.metrics import threshold_crossing
+from ldn_jax.metrics import completed_returns, run_crossing
 from ldn_jax.run_dir import RunDir
 from ldn_jax.train import failure_names
 
@@ -56,7 +56,7 @@ def metric_lines(
                     "episodes": int(at("episodes")),
                     "env_steps": int(at("env_steps")),
                     "imagined_steps": int(at("imagined_steps")),
-                    "episode_return": float(at("episode_return")),
+                    "episode_return": finite_or_none(at("episode_return")),
                     "moving_return": float(at("moving_return")),
                     "ld_mean": finite_or_none(at("ld_mean")) if "ld_mean" in metrics else None,
                     "losses": {name: finite_or_none(at(name)) for name in losses},
@@ -110,12 +110,7 @@ def summarize(config: Config, history: dict, eval_returns, states, session: dict
         for seed in range(config.seeds):
             crossing = None
             if threshold is not None:
-                crossing = threshold_crossing(
-                    history["moving_after"][ki, seed],
-                    history["lengths"][ki, seed],
-                    history["env_steps"][ki, seed],
-                    threshold,
-                )
+                crossing = run_crossing(history, (ki, seed), threshold)
             seconds = None
             if crossing is not None:
                 # Wall time of the whole vmapped batch, pro rata within the crossing's chunk.
@@ -187,15 +182,16 @@ def statistics(config: Config, runs: list[dict]) -> list[dict]:
 def plot_curves(config: Config, history: dict, run: RunDir) -> None:
     """curves.png: the moving return after every real episode, in completion order (mean and
     band over seeds), one line per K; a run of a few iterations still draws a curve."""
-    after = history["moving_after"]  # [K, S, N, W]
-    n_k, seeds = after.shape[:2]
-    returns = after.reshape(n_k, seeds, -1)
-    episodes = np.arange(1, returns.shape[-1] + 1)
     label = lambda i: " ".join([config.algo, config.point_name(i)]).strip()
-    curves = {
-        (label(i) if len(config.points) > 1 else config.algo): (episodes, returns[i])
-        for i in range(len(config.points))
-    }
+    curves = {}
+    for i in range(len(config.points)):
+        runs = [completed_returns(history, (i, seed)) for seed in range(config.seeds)]
+        shortest = min(len(r) for r in runs)  # schedule "steps": seeds end unequal counts
+        returns = np.stack([r[:shortest] for r in runs])
+        curves[label(i) if len(config.points) > 1 else config.algo] = (
+            np.arange(1, shortest + 1),
+            returns,
+        )
     title = f"{config.env}: {config.algo}"
     learning_curves(curves, run.curves_file, title, config.resolved_threshold)
 

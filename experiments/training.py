@@ -187,7 +187,7 @@ def _train_chunks(config, options, run, chunk_fn, states, k, history, session, p
                     name = f"chunk_{chunk + 1:05d}"
                     run.save_checkpoint(name, states, history, session, writer)
                 if stopping:
-                    known = chunks if config.steps is None else None
+                    known = chunks if _counted_budget(config) is None else None
                     raise Interrupted(stop.signum or signal.SIGINT, chunk + 1, known)
                 if last:
                     break
@@ -197,12 +197,25 @@ def _train_chunks(config, options, run, chunk_fn, states, k, history, session, p
 
 
 def budget_spent(config: Config, history: dict) -> bool:
-    """With a `steps` budget: whether every run has reached it (or was frozen by the
-    non-finite guard) by the last chunk in `history`."""
-    if config.steps is None or not history.get("env_steps"):
+    """With a `steps` budget (or under schedule "steps" an `episodes` one): whether every
+    run has reached it (or was frozen by the non-finite guard) by the last chunk in
+    `history`."""
+    counted = _counted_budget(config)
+    if counted is None or not history.get(counted[0]):
         return False
-    steps, failure = history["env_steps"][-1][..., -1], history["failure"][-1][..., -1]
-    return bool(((steps >= config.steps) | (failure != 0)).all())
+    name, budget = counted
+    spent, failure = history[name][-1][..., -1], history["failure"][-1][..., -1]
+    return bool(((spent >= budget) | (failure != 0)).all())
+
+
+def _counted_budget(config: Config) -> tuple[str, int] | None:
+    """The budget runs stop at as they reach it, `(metric, budget)`; None where the number
+    of iterations is the budget (schedule "episodes" without `steps`)."""
+    if config.steps is not None:
+        return "env_steps", config.steps
+    if config.schedule == "steps":
+        return "episodes", config.episodes
+    return None
 
 
 class Progress:
@@ -225,6 +238,8 @@ class Progress:
             TextColumn("{task.fields[status]}"),
         )
         total = config.iterations * config.workers if config.steps is None else config.steps
+        if config.steps is None and config.schedule == "steps":
+            total = config.episodes
         self.task = self.bar.add_task("train", total=total, status="compiling...")
         self.bar.start()
 
@@ -233,12 +248,13 @@ class Progress:
         env steps over runs, capped at the budget) and `status`."""
         if self.quiet:
             return
-        if self.config.steps is None:
+        counted = _counted_budget(self.config)
+        if counted is None:
             iterations = sum(part.shape[2] for part in history.get("episodes", []))
             spent = iterations * self.config.workers
-        elif history.get("env_steps"):
-            steps = history["env_steps"][-1][..., -1]
-            spent = int(np.minimum(steps, self.config.steps).mean())
+        elif history.get(counted[0]):
+            name, budget = counted
+            spent = int(np.minimum(history[name][-1][..., -1], budget).mean())
         else:
             spent = 0
         self.bar.update(self.task, completed=spent, status=status)

@@ -22,6 +22,9 @@ ACTIVATIONS = tuple(networks.ACTIVATIONS)
 """Hidden activations the networks know (`ldn_jax.networks` owns them)."""
 
 IMAGINE_MODES = ("episodes", "memory", "batch")
+
+SCHEDULES = ("episodes", "steps")
+"""What one iteration of real play is (`Config.schedule`)."""
 """How the imagined stage feeds the learner (`ModelConfig.imagine`)."""
 
 LD_REDUCTIONS = ("mean", "sum")
@@ -245,6 +248,19 @@ class Config:
     at the first iteration that reaches it, the batch once every run has."""
     workers: int = 8
     """Synchronous workers (vmapped); one real and one imagined episode each per iteration."""
+    schedule: str = "episodes"
+    """What an iteration's real play is, one of `SCHEDULES`:
+    "episodes": each worker plays one whole episode from a fresh start (Algorithm 1 read
+    literally, the `paper` preset): under vmap every worker of every seed and K computes
+    until the longest episode of the batch has ended, the rest as weight-0 rows.
+    "steps": each worker plays `iteration_steps` real steps, starting its next episode at
+    once when one ends; episodes carry over between iterations (the workers' env states
+    live in the run's state), are counted as they complete (in the order (step, worker)),
+    and no step is masked. M1 is fitted and each worker imagines one episode once per
+    iteration, as under "episodes"."""
+    iteration_steps: int | None = None
+    """Schedule "steps": real steps per worker per iteration, a multiple of `agent.n_steps`
+    (None: 5 segments, `5 * agent.n_steps`); ignored under "episodes"."""
     backend: str = "auto"
     """MuJoCo tasks: physics engine, "native" (MuJoCo's C engine, the fast one on CPU), "mjx"
     (MJX, for GPU/TPU) or "auto" (native on CPU, mjx elsewhere; a run records what it
@@ -350,11 +366,24 @@ class Config:
         return with_values(config, {n: v for n, v in point.items() if n != "k"})
 
     @property
+    def steps_per_iteration(self) -> int:
+        """Schedule "steps": real steps per worker per iteration (`iteration_steps`)."""
+        return self.iteration_steps or 5 * self.agent.n_steps
+
+    @property
     def iterations(self) -> int:
         """Iterations needed for `episodes` real episodes, rounded up to whole chunks; with a
         `steps` budget, the most it can take (every episode one step long): runs stop as
-        they reach it, usually far sooner."""
+        they reach it, usually far sooner. Under schedule "steps" a steps budget takes
+        exactly its iterations, and an episodes budget at most those of episodes of the
+        env's step limit (runs stop as they reach it)."""
         per_chunk = self.workers * self.chunk_iterations
+        if self.schedule == "steps":
+            steps = self.steps
+            if steps is None:
+                steps = self.episodes * envs.make(self.env)[1].max_steps
+            per_chunk *= self.steps_per_iteration
+            return math.ceil(steps / per_chunk) * self.chunk_iterations
         real_episodes = self.episodes if self.steps is None else self.steps
         return math.ceil(real_episodes / per_chunk) * self.chunk_iterations
 
@@ -673,6 +702,24 @@ def validate(config: Config) -> Config:
         (config.episodes >= 1, f"episodes must be >= 1, got {config.episodes}"),
         (config.steps is None or config.steps >= 1, f"steps must be >= 1, got {config.steps}"),
         (config.workers >= 1, f"workers must be >= 1, got {config.workers}"),
+        (
+            config.schedule in SCHEDULES,
+            f"unknown schedule {config.schedule!r}; valid: {', '.join(SCHEDULES)}",
+        ),
+        (
+            config.iteration_steps is None
+            or (
+                config.iteration_steps >= config.agent.n_steps
+                and config.iteration_steps % config.agent.n_steps == 0
+            ),
+            f"iteration_steps must be a positive multiple of n_steps ({config.agent.n_steps}), "
+            f"got {config.iteration_steps}",
+        ),
+        (
+            config.iteration_steps is None or config.schedule == "steps",
+            "iteration_steps is schedule steps' (an iteration of schedule episodes is one "
+            "episode per worker)",
+        ),
         (
             config.backend in BACKEND_CHOICES,
             f"backend must be one of {', '.join(BACKEND_CHOICES)}",

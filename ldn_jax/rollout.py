@@ -5,6 +5,10 @@ M1): a world is a pure `step(key, world_state, obs, action)`. Workers whose epis
 ended stay in the batch with weight 0; nothing branches on them. With a `reset`, a worker
 whose episode ends starts the next at once instead (no weight-0 rows), and the batch plays
 whole segments until every worker has ended at least one episode.
+
+`play_steps` is schedule "steps": a fixed number of segments from where the workers stand,
+each worker starting its next episode as one ends, so that nothing idles; the episodes carry
+over from one call to the next (`Workers`).
 """
 
 from __future__ import annotations
@@ -85,37 +89,17 @@ class Episodes:
         return length, total / episodes
 
 
-def play_episodes(
-    key: Array,
-    learner_state: LearnerState,
+def _segment_fn(
     learner: Any,
     world_step: WorldStep,
-    obs: Array,
-    world: Any,
     max_steps: int,
-    reset: Callable[[Array], tuple[Array, Any]] | None = None,
-    learn: bool = True,
-    observe: bool = False,
-) -> tuple[LearnerState, Episodes]:
-    """Play one episode on each of W workers, updating the learner every `n_steps` steps.
-
-    An episode ends on `terminated`, on `truncated`, or after `max_steps` steps.
-
-    `reset(key) -> (obs [W, d], world_state)`: fresh starts for every worker. With it, a
-    worker whose episode ends starts another in the next step, so every row of the batch is
-    live; segments are played until every worker has ended an episode (at least one
-    segment). An episode still running at the batch's end is cut there: its last step
-    bootstraps, as at any segment's end.
-
-    `learn=False`: only play (the learner's parameters act throughout and are returned
-    unchanged; `losses` is empty), for a learner that learns from the whole batch later.
-
-    `observe=True` (real episodes): each segment's observations go into the learner's
-    running observation statistics (`AgentConfig.normalize_obs`) before it learns from it.
-    """
+    reset: Callable[[Array], tuple[Array, Any]] | None,
+    learn: bool,
+    observe: bool,
+) -> Callable[[EpisodeCarry, Array], tuple[EpisodeCarry, tuple]]:
+    """`(carry, key) -> (carry, (transitions, extras, losses))`: n steps of every worker,
+    then the learner's update (`play_episodes` says what the arguments mean)."""
     n_steps = learner.config.n_steps
-    n_segments = math.ceil(max_steps / n_steps)
-    workers = obs.shape[0]
 
     def step(carry: EpisodeCarry, key: Array):
         k_act, k_world = jax.random.split(key)
@@ -167,6 +151,42 @@ def play_episodes(
         learner_state, losses = learner.update(carry.learner, transitions, k_update)
         return carry.replace(learner=learner_state), (transitions, extras, losses)
 
+    return segment
+
+
+def play_episodes(
+    key: Array,
+    learner_state: LearnerState,
+    learner: Any,
+    world_step: WorldStep,
+    obs: Array,
+    world: Any,
+    max_steps: int,
+    reset: Callable[[Array], tuple[Array, Any]] | None = None,
+    learn: bool = True,
+    observe: bool = False,
+) -> tuple[LearnerState, Episodes]:
+    """Play one episode on each of W workers, updating the learner every `n_steps` steps.
+
+    An episode ends on `terminated`, on `truncated`, or after `max_steps` steps.
+
+    `reset(key) -> (obs [W, d], world_state)`: fresh starts for every worker. With it, a
+    worker whose episode ends starts another in the next step, so every row of the batch is
+    live; segments are played until every worker has ended an episode (at least one
+    segment). An episode still running at the batch's end is cut there: its last step
+    bootstraps, as at any segment's end.
+
+    `learn=False`: only play (the learner's parameters act throughout and are returned
+    unchanged; `losses` is empty), for a learner that learns from the whole batch later.
+
+    `observe=True` (real episodes): each segment's observations go into the learner's
+    running observation statistics (`AgentConfig.normalize_obs`) before it learns from it.
+    """
+    n_steps = learner.config.n_steps
+    n_segments = math.ceil(max_steps / n_steps)
+    workers = obs.shape[0]
+    segment = _segment_fn(learner, world_step, max_steps, reset, learn, observe)
+
     carry = EpisodeCarry(
         learner=learner_state,
         obs=obs,
@@ -203,3 +223,86 @@ def play_episodes(
         steps=jax.tree.map(flat, steps), extras=jax.tree.map(flat, extras), losses=losses
     )
     return carry.learner, episodes
+
+
+@struct.dataclass
+class Workers:
+    """W workers of the real env between iterations (schedule "steps"): each is somewhere in
+    an episode that carries over into the next iteration."""
+
+    obs: Array
+    """`[W, obs_size]`: the observation each worker acts on next."""
+    world: Any
+    """The env states, `[W, ...]`."""
+    time: Array
+    """`[W]` int32: steps taken in the worker's current episode."""
+    total: Array
+    """`[W]` float32: the env's reward summed over the current episode so far."""
+
+
+def workers_init(obs: Array, world: Any) -> Workers:
+    """Workers at the start of their first episodes."""
+    zeros = jnp.zeros(obs.shape[:1])
+    return Workers(obs=obs, world=world, time=zeros.astype(jnp.int32), total=zeros)
+
+
+@struct.dataclass
+class Completed:
+    """The episodes that ended during a `play_steps` call, at the step each ended: `[T, W]`,
+    valid where `ended` (the (step, worker) order is completion order, ties by worker)."""
+
+    ended: Array
+    """`[T, W]` bool: the worker's episode ended at this step."""
+    returns: Array
+    """`[T, W]`: the episode's return, its steps in earlier calls included (0 where not
+    ended)."""
+    lengths: Array
+    """`[T, W]` int32: the episode's length (0 where not ended)."""
+
+
+def play_steps(
+    key: Array,
+    learner_state: LearnerState,
+    learner: Any,
+    world_step: WorldStep,
+    workers: Workers,
+    segments: int,
+    max_steps: int,
+    reset: Callable[[Array], tuple[Array, Any]],
+    observe: bool = False,
+) -> tuple[LearnerState, Episodes, Completed, Workers]:
+    """Play `segments` segments of n steps on each of W workers from where they are,
+    updating the learner after each (schedule "steps"). A worker whose episode ends
+    (`terminated`, `truncated`, or `max_steps` steps) starts the next from `reset(key)` at
+    once, so every row counts (weight 1) and the loop has a fixed length. Returns the
+    learner, the steps `[T, W, ...]` (T = segments x n), the episodes that ended, and the
+    workers where they stand. `observe` as in `play_episodes`."""
+    segment = _segment_fn(learner, world_step, max_steps, reset, True, observe)
+    n = workers.obs.shape[0]
+    carry = EpisodeCarry(
+        learner=learner_state,
+        obs=workers.obs,
+        world=workers.world,
+        alive=jnp.ones((n,), bool),
+        finished=jnp.zeros((n,), bool),
+        time=workers.time,
+    )
+    carry, (steps, extras, losses) = jax.lax.scan(segment, carry, jax.random.split(key, segments))
+    flat = lambda x: x.reshape((-1, *x.shape[2:]))
+    steps, extras = jax.tree.map(flat, steps), jax.tree.map(flat, extras)
+    losses = jax.tree.map(jnp.mean, losses)
+
+    def count(running, step):  # the episodes' returns and lengths as they end
+        total, time = running
+        reward, done = step
+        total, time = total + reward, time + 1
+        kept = (jnp.where(done, 0.0, total), jnp.where(done, 0, time))
+        return kept, (jnp.where(done, total, 0.0), jnp.where(done, time, 0))
+
+    (total, time), (returns, lengths) = jax.lax.scan(
+        count, (workers.total, workers.time), (steps.reward, steps.done)
+    )
+    workers = Workers(obs=carry.obs, world=carry.world, time=time, total=total)
+    completed = Completed(ended=steps.done, returns=returns, lengths=lengths)
+    episodes = Episodes(steps=steps, extras=extras, losses=losses)
+    return carry.learner, episodes, completed, workers

@@ -1,7 +1,9 @@
 """The training iteration (Algorithm 1, synchronous reading) and its compiled chunks.
 
 One iteration, per seed and K:
-1. `real_stage`: each of W workers plays one real episode; the learner updates every n steps.
+1. `real_stage`: each of W workers plays one real episode; the learner updates every n steps
+   (schedule "episodes"; under "steps" each plays `iteration_steps` steps instead, its
+   episodes carrying over between iterations).
 2. `model_stage`: M1 takes `model.updates` minibatch steps on the real buffer.
 3. `imagine_stage`: each worker plays one episode in M1 from a fresh initial state.
 `a2c` runs stage 1 only; `a2c-model` runs all three without the LD stop; `ldn` with it.
@@ -26,7 +28,7 @@ from ldn_jax.learners import LEARNERS
 from ldn_jax.learners.base import LearnerState
 from ldn_jax.learners.ppo import Memory
 from ldn_jax.learning_degree import ld_histogram
-from ldn_jax.rollout import Episodes, play_episodes
+from ldn_jax.rollout import Completed, Episodes, Workers, play_episodes, play_steps, workers_init
 from ldn_jax.sharding import compiler_options, shard_seeds
 
 Array = jax.Array
@@ -45,6 +47,8 @@ class TrainState:
     memory: Memory | None
     """The imaginary memory I of `ModelConfig.imagine = "memory"` (PPO rows waiting for a
     full batch); None otherwise."""
+    workers: Workers | None
+    """The real env's workers mid-episode (`Config.schedule = "steps"`); None otherwise."""
     moving_return: Array
     """NaN until the first episode completes."""
     episodes: Array
@@ -133,12 +137,16 @@ class Trainer:
             )
             if self.config.model.imagine == "memory":
                 memory = self.learner.memory_init(self.config.workers)
+        workers = None
+        if self.config.schedule == "steps":  # a key of its own: the other draws stay as they are
+            workers = workers_init(*self._reset(jax.random.fold_in(key, 1)))
         zero = jnp.zeros((), jnp.int32)
         return TrainState(
             learner=self.learner.init(k_learner),
             model=model,
             buffer=buffer,
             memory=memory,
+            workers=workers,
             moving_return=jnp.full((), jnp.nan, jnp.float32),
             episodes=zero,
             env_steps=zero,
@@ -166,6 +174,7 @@ class Trainer:
         return next_obs, world, reward, terminated, truncated, {}
 
     def real_stage(self, state: TrainState, key: Array) -> tuple[TrainState, Episodes]:
+        """One real episode per worker from fresh starts (schedule "episodes")."""
         k_reset, k_play = jax.random.split(key)
         obs, env_state = self._reset(k_reset)
         learner, episodes = play_episodes(
@@ -179,6 +188,23 @@ class Trainer:
             observe=True,
         )
         return state.replace(learner=learner), episodes
+
+    def real_steps(self, state: TrainState, key: Array) -> tuple[TrainState, Episodes, Completed]:
+        """`config.steps_per_iteration` real steps per worker from where the workers stand
+        (schedule "steps"); the episodes that ended on the way."""
+        segments = self.config.steps_per_iteration // self.config.agent.n_steps
+        learner, episodes, completed, workers = play_steps(
+            key,
+            state.learner,
+            self.learner,
+            self._env_world,
+            state.workers,
+            segments,
+            self.max_steps,
+            reset=self._reset,
+            observe=True,
+        )
+        return state.replace(learner=learner, workers=workers), episodes, completed
 
     def model_stage(
         self, state: TrainState, episodes: Episodes, key: Array
@@ -283,10 +309,14 @@ class Trainer:
         return state, metrics
 
     def spent(self, state: TrainState) -> Array:
-        """Whether a run has reached its `config.steps` budget (never without one)."""
-        if self.config.steps is None:
-            return jnp.zeros((), bool)
-        return state.env_steps >= self.config.steps
+        """Whether a run has reached its `config.steps` budget, or under schedule "steps"
+        its `config.episodes` (schedule "episodes" without a steps budget: never, the
+        iteration count is the budget)."""
+        if self.config.steps is not None:
+            return state.env_steps >= self.config.steps
+        if self.config.schedule == "steps":
+            return state.episodes >= self.config.episodes
+        return jnp.zeros((), bool)
 
     def _failure(self, state: TrainState, metrics: dict) -> Array:
         """The `FAILURES` bits of the quantities of one iteration that are not all finite."""
@@ -304,24 +334,42 @@ class Trainer:
 
     def _iteration(self, state: TrainState, gain: Array) -> tuple[TrainState, dict]:
         key, k_real, k_model, k_imagine = jax.random.split(state.key, 4)
-        state, real = self.real_stage(state, k_real)
-
-        # The moving return advances over episodes in completion order (shorter first,
-        # ties by worker), as the paper's global counter sees them.
-        lengths, returns = real.lengths, real.returns
-        order = jnp.argsort(lengths, stable=True)
+        if self.config.schedule == "steps":
+            state, real, completed = self.real_steps(state, k_real)
+            # Completion order is (step, worker): flattened row-major.
+            ended = completed.ended.reshape(-1)
+            returns, lengths = completed.returns.reshape(-1), completed.lengths.reshape(-1)
+            workers = self.config.workers
+            at_step = jnp.arange(1, completed.ended.shape[0] + 1, dtype=jnp.int32) * workers
+            count = ended.sum()
+            extra = {
+                "ended": ended,
+                "steps_at": jnp.repeat(state.env_steps + at_step, workers),
+            }
+            episode_return = jnp.where(count > 0, returns.sum() / jnp.maximum(count, 1), jnp.nan)
+        else:
+            state, real = self.real_stage(state, k_real)
+            # The moving return advances over episodes in completion order (shorter first,
+            # ties by worker), as the paper's global counter sees them.
+            order = jnp.argsort(real.lengths, stable=True)
+            returns, lengths = real.returns[order], real.lengths[order]
+            ended, count, extra = jnp.ones(returns.shape, bool), self.config.workers, {}
+            episode_return = real.returns.mean()
         decay = self.config.moving_decay
 
-        def advance(m, r):
-            m = jnp.where(jnp.isnan(m), r, decay * m + (1.0 - decay) * r)
+        def advance(m, episode):
+            r, valid = episode
+            new = jnp.where(jnp.isnan(m), r, decay * m + (1.0 - decay) * r)
+            m = jnp.where(valid, new, m)
             return m, m
 
-        moving, moving_after = jax.lax.scan(advance, state.moving_return, returns[order])
+        moving, moving_after = jax.lax.scan(advance, state.moving_return, (returns, ended))
         metrics = {
-            "episode_return": returns.mean(),
-            "returns": returns[order],
-            "lengths": lengths[order],
+            "episode_return": episode_return,
+            "returns": returns,
+            "lengths": lengths,
             "moving_after": moving_after,
+            **extra,
             **{f"real_{name}": value for name, value in real.losses.items()},
         }
         imagined_steps = jnp.zeros((), jnp.int32)
@@ -342,8 +390,8 @@ class Trainer:
 
         state = state.replace(
             moving_return=moving,
-            episodes=state.episodes + self.config.workers,
-            env_steps=state.env_steps + lengths.sum(),
+            episodes=state.episodes + count,
+            env_steps=state.env_steps + real.lengths.sum(),
             imagined_steps=state.imagined_steps + imagined_steps,
             iteration=state.iteration + 1,
             key=key,

@@ -38,7 +38,7 @@ from scipy import stats as scipy_stats
 from experiments import stats
 from experiments.paper import common, figure5
 from ldn_jax.config import Config, validate
-from ldn_jax.metrics import threshold_crossing
+from ldn_jax.metrics import run_crossing
 
 READINGS = {
     "literal": ("ldn", {}, "mean over outputs, B = 1 (`paper`)", "mean (paper)"),
@@ -169,9 +169,7 @@ def _points(entry: dict) -> list[dict]:
 def steps_to(at: dict, seed: int, threshold: float) -> int | None:
     """Env steps until one seed's moving return first reaches `threshold` (as summary.json
     counts them, `threshold_crossing`); None if it never does."""
-    crossing = threshold_crossing(
-        at["moving_after"][seed], at["lengths"][seed], at["env_steps"][seed], threshold
-    )
+    crossing = run_crossing(at, (seed,), threshold)
     return None if crossing is None else crossing[1]
 
 

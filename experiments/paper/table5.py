@@ -20,7 +20,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 import numpy as np
 
 from experiments.paper import common
-from ldn_jax.metrics import threshold_crossing
+from ldn_jax.metrics import run_crossing
 
 ENVS = ("inverted_pendulum", "halfcheetah", "hopper")
 ALGOS = ("ppo", "ppo-model", "ppo-ldn")
@@ -32,12 +32,7 @@ def episodes_to(history: dict[str, np.ndarray], level: float) -> list[int | None
     """Per seed (K = 1): the global episode at which the moving return first reaches `level`."""
     out = []
     for seed in range(history["moving_after"].shape[1]):
-        crossing = threshold_crossing(
-            history["moving_after"][0, seed],
-            history["lengths"][0, seed],
-            history["env_steps"][0, seed],
-            level,
-        )
+        crossing = run_crossing(history, (0, seed), level)
         out.append(crossing[0] if crossing else None)
     return out
 

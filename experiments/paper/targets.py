@@ -25,7 +25,7 @@ import numpy as np
 
 from experiments.paper import common
 from ldn_jax.config import from_preset, validate
-from ldn_jax.metrics import threshold_crossing
+from ldn_jax.metrics import run_crossing
 
 PENDULUM_ALGOS = ("a2c", "a2c-model", "ldn", "ppo", "ppo-model", "ppo-ldn")
 PENDULUM_LEVEL = 900.0
@@ -65,9 +65,7 @@ def pendulum_row(entry: dict) -> dict:
     after = history["moving_after"][0]  # [S, N, W]: after each episode, in completion order
     reach = []
     for seed in range(after.shape[0]):
-        crossing = threshold_crossing(
-            after[seed], history["lengths"][0, seed], history["env_steps"][0, seed], PENDULUM_LEVEL
-        )
+        crossing = run_crossing(history, (0, seed), PENDULUM_LEVEL)
         reach.append(None if crossing is None else crossing[1])
     highest = np.nanmax(after.reshape(after.shape[0], -1), axis=-1)
     reached = sum(r is not None for r in reach)
