@@ -134,7 +134,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         type=int,
         metavar="T",
         help="--schedule steps: real steps per worker per iteration, a multiple of the "
-        "learner's n_steps (default 5 x n_steps)",
+        "learner's n_steps (default: the env's step limit, in whole segments)",
     )
     p.add_argument("--preset", help=f"one of: {', '.join(PRESETS)} (default {d.preset})")
     p.add_argument("--threshold", type=float, help="moving-return threshold")

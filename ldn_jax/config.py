@@ -256,11 +256,15 @@ class Config:
     "steps": each worker plays `iteration_steps` real steps, starting its next episode at
     once when one ends; episodes carry over between iterations (the workers' env states
     live in the run's state), are counted as they complete (in the order (step, worker)),
-    and no step is masked. M1 is fitted and each worker imagines one episode once per
-    iteration, as under "episodes"."""
+    and no step is masked. M1 is fitted once per iteration, and each worker imagines one
+    episode per real episode it ended in the iteration (Algorithm 1's one after each),
+    within `iteration_steps` imagined steps (`ModelConfig.imagine` "batch": its fixed
+    quota instead)."""
     iteration_steps: int | None = None
     """Schedule "steps": real steps per worker per iteration, a multiple of `agent.n_steps`
-    (None: 5 segments, `5 * agent.n_steps`); ignored under "episodes"."""
+    (None: the env's step limit rounded up to whole segments, so that an iteration is as
+    long as the longest episode and M1 is fitted once per episode's worth of steps, as the
+    paper fits it once per episode late in training)."""
     backend: str = "auto"
     """MuJoCo tasks: physics engine, "native" (MuJoCo's C engine, the fast one on CPU), "mjx"
     (MJX, for GPU/TPU) or "auto" (native on CPU, mjx elsewhere; a run records what it
@@ -368,7 +372,10 @@ class Config:
     @property
     def steps_per_iteration(self) -> int:
         """Schedule "steps": real steps per worker per iteration (`iteration_steps`)."""
-        return self.iteration_steps or 5 * self.agent.n_steps
+        if self.iteration_steps is not None:
+            return self.iteration_steps
+        n = self.agent.n_steps
+        return math.ceil(envs.make(self.env)[1].max_steps / n) * n
 
     @property
     def iterations(self) -> int:

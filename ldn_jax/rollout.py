@@ -48,6 +48,9 @@ class EpisodeCarry:
     """`[W]` bool: the worker has ended at least one episode."""
     time: Array
     """`[W]` int32: steps taken in the worker's current episode."""
+    owed: Array | None = None
+    """`[W]` int32: episodes the worker has still to end (`play_episodes`' `quota`); None
+    without a quota."""
 
 
 @struct.dataclass
@@ -121,12 +124,16 @@ def _segment_fn(
             weight=carry.alive.astype(jnp.float32),
         )
         finished = carry.finished | (carry.alive & done)
+        owed = carry.owed
         if reset is None:  # a finished worker keeps its last observation, masked
             alive = carry_on = carry.alive & ~done
             restart_obs, restart_world = carry.obs, carry.world
         else:  # a finished worker starts its next episode
             alive, carry_on = carry.alive, ~done
             restart_obs, restart_world = reset(k_reset)
+            if owed is not None:  # it plays on until it owes none
+                owed = owed - (carry.alive & done)
+                alive, finished = carry.alive & (owed > 0), owed <= 0
         select = lambda new, old: jnp.where(
             carry_on.reshape((-1,) + (1,) * (new.ndim - 1)), new, old
         )
@@ -136,6 +143,7 @@ def _segment_fn(
             alive=alive,
             finished=finished,
             time=jnp.where(carry_on, carry.time + 1, 0),
+            owed=owed,
         )
         return carry, (transition, extras)
 
@@ -165,6 +173,8 @@ def play_episodes(
     reset: Callable[[Array], tuple[Array, Any]] | None = None,
     learn: bool = True,
     observe: bool = False,
+    quota: Array | None = None,
+    segments: int | None = None,
 ) -> tuple[LearnerState, Episodes]:
     """Play one episode on each of W workers, updating the learner every `n_steps` steps.
 
@@ -181,19 +191,26 @@ def play_episodes(
 
     `observe=True` (real episodes): each segment's observations go into the learner's
     running observation statistics (`AgentConfig.normalize_obs`) before it learns from it.
+
+    `quota` (`[W]` int, with `reset`): worker w plays `quota[w]` episodes one after the
+    other (none: all its rows weight 0), then idles masked; at most `segments` segments
+    (default: one episode's, `max_steps` rounded up), where the episode still running is cut.
     """
     n_steps = learner.config.n_steps
-    n_segments = math.ceil(max_steps / n_steps)
+    n_segments = segments or math.ceil(max_steps / n_steps)
     workers = obs.shape[0]
     segment = _segment_fn(learner, world_step, max_steps, reset, learn, observe)
+    if quota is not None and reset is None:
+        raise ValueError("a quota of episodes needs `reset` (fresh starts)")
 
     carry = EpisodeCarry(
         learner=learner_state,
         obs=obs,
         world=world,
-        alive=jnp.ones((workers,), bool),
-        finished=jnp.zeros((workers,), bool),
+        alive=jnp.ones((workers,), bool) if quota is None else quota > 0,
+        finished=jnp.zeros((workers,), bool) if quota is None else quota <= 0,
         time=jnp.zeros((workers,), jnp.int32),
+        owed=None if quota is None else quota.astype(jnp.int32),
     )
     keys = jax.random.split(key, n_segments)
     # The loop over segments stops once every worker has ended an episode. Without `reset`

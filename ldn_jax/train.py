@@ -222,17 +222,23 @@ class Trainer:
         return state.replace(model=model, buffer=buffer), loss
 
     def imagine_stage(
-        self, state: TrainState, key: Array, gain: Array
+        self, state: TrainState, key: Array, gain: Array, quota: Array | None = None
     ) -> tuple[TrainState, Episodes]:
-        """Imagined episodes in M1 from fresh initial states (`ModelConfig.imagine`)."""
+        """Imagined episodes in M1 from fresh initial states (`ModelConfig.imagine`).
+
+        `quota` (schedule "steps"; `[W]`): worker w imagines `quota[w]` episodes, one per real
+        episode it ended in the iteration, as Algorithm 1 imagines one after each real one,
+        within as many steps as it took real ones (`Config.steps_per_iteration`)."""
         k_reset, k_play = jax.random.split(key)
-        reset = None
+        reset = segments = None
         history = ld_history(self.dynamics, self.config.workers)  # the LD window's start
-        if self.config.model.imagine == "batch":
+        if self.config.model.imagine == "batch" or quota is not None:
             starts, _ = self._reset(k_reset, IMAGINED_STARTS * self.config.workers)
             obs = starts[: self.config.workers]
             pick = lambda key: starts[jax.random.randint(key, obs.shape[:1], 0, len(starts))]
             reset = lambda key: (pick(key), history)
+            if quota is not None:
+                segments = self.config.steps_per_iteration // self.config.agent.n_steps
         else:
             obs, _ = self._reset(k_reset)
         rule = self.config.stop_rule
@@ -258,6 +264,8 @@ class Trainer:
             imagined_steps_limit(self.config.model, rule, self.max_steps),
             reset=reset,
             learn=not memory,
+            quota=quota,
+            segments=segments,
         )
         if memory:
             learner, state_memory, losses = self.learner.learn_from_memory(
@@ -375,7 +383,10 @@ class Trainer:
         imagined_steps = jnp.zeros((), jnp.int32)
         if self.dynamics is not None:
             state, metrics["model_loss"] = self.model_stage(state, real, k_model)
-            state, imagined = self.imagine_stage(state, k_imagine, gain)
+            quota = None
+            if self.config.schedule == "steps" and self.config.model.imagine != "batch":
+                quota = completed.ended.sum(axis=0)
+            state, imagined = self.imagine_stage(state, k_imagine, gain, quota)
             weight = imagined.steps.weight
             imagined_steps = weight.sum().astype(jnp.int32)
             ld = imagined.extras["ld"]

@@ -9,12 +9,14 @@ import sys
 from pathlib import Path
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from experiments.training import Interrupted, train
 from ldn_jax.config import from_preset, validate
 from ldn_jax.metrics import run_crossing, threshold_crossing
+from ldn_jax.rollout import play_episodes
 from ldn_jax.run_dir import read_config as read_run_config
 from ldn_jax.train import Trainer
 from tests.test_resume import StopAfter, _lines
@@ -64,6 +66,8 @@ def test_counts_equal_the_sums_of_the_weights_and_of_the_ended_episodes(played):
         m["imagined_steps"] - s.imagined_steps for m, s in zip(metrics, states, strict=False)
     )
     assert final.iteration == 6
+    imagined = np.diff([s.imagined_steps for s in states])
+    assert (imagined > 0).all() and (imagined <= T * W).all()  # within the real steps' bound
 
 
 def test_episodes_carry_over_and_their_returns_span_iterations(played):
@@ -200,3 +204,35 @@ def test_bad_schedules_fail_in_one_line(tmp_path, args, message):
     )
     assert result.returncode == 2 and message in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_a_quota_of_imagined_episodes_plays_each_workers_owed_episodes(played):
+    """A world whose episodes last 3 steps: worker w plays quota[w] of them, then idles
+    masked; the one that would overrun the step bound is cut there."""
+    config, _, _, _ = played
+    learner = Trainer(config).learner
+    quota = jnp.array([0, 1, 2, 9])  # 9 x 3 steps > the 2 segments' 20: cut at step 20
+
+    def world_step(key, world, obs, action, alive):
+        world = world + 1
+        ones = jnp.ones(world.shape)
+        return obs, world, ones, world % 3 == 0, jnp.zeros(world.shape, bool), {}
+
+    obs = jnp.zeros((4, 4))
+    reset = lambda key: (obs, jnp.zeros(4, jnp.int32))
+    params = learner.init(jax.random.key(0))
+    _, episodes = play_episodes(
+        jax.random.key(1),
+        params,
+        learner,
+        world_step,
+        obs,
+        jnp.zeros(4, jnp.int32),
+        1000,
+        reset=reset,
+        learn=False,
+        quota=quota,
+        segments=2,
+    )
+    np.testing.assert_array_equal(episodes.lengths, [0, 3, 6, 20])
+    np.testing.assert_array_equal(episodes.ended, [0, 1, 2, 6])
