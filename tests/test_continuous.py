@@ -188,13 +188,15 @@ def test_locomotion_ppo_scales_rewards_and_standardises_observations():
 
 def test_fast_preset_sets_its_constants_and_budget_and_flags_still_win():
     config = from_preset("fast", env="cartpole-v1", algo="a2c")
-    assert config.episodes == 3000 and config.steps is None
+    assert config.steps == 600_000 and config.schedule == "steps" and config.k == (1.0,)
     assert config.agent.gamma == 0.99 and config.agent.reward_scale == 0.1
     assert config.agent.normalize_obs and config.agent.actor_lr == 1e-3
     ppo = from_preset("fast", env="cartpole-v1", algo="ppo")
-    assert ppo.episodes == 800 and not ppo.agent.normalize_obs and ppo.agent.reward_scale == 1.0
-    assert from_preset("fast", env="cartpole-v1", algo="ldn", episodes=50).episodes == 50
-    assert from_preset("paper", env="cartpole-v1", algo="a2c").episodes != 3000
+    assert ppo.steps == 200_000 and not ppo.agent.normalize_obs and ppo.agent.reward_scale == 1.0
+    given = from_preset("fast", env="cartpole-v1", algo="ldn", episodes=50, k=(0.5, 1.0))
+    assert (given.episodes, given.steps, given.k) == (50, None, (0.5, 1.0))  # flags win
+    paper = from_preset("paper", env="cartpole-v1", algo="a2c")
+    assert paper.steps is None and paper.schedule == "episodes"
 
 
 def test_continuous_defaults_normalise_the_model():

@@ -24,13 +24,13 @@ def test_reaches_150_on_cartpole_v1(algo, tmp_path):
     assert len(reached) >= 3, summary["runs"]
 
 
-# The fast preset on cartpole-v1, 10 seeds (2026-12-01): a2c's greedy policy scored 500 on
-# every seed after 3,000 episodes (14 s of training), ppo's after 800 (21.5 s beside another
-# job). CartPole-v1 counts as solved at 475.
+# The fast preset on cartpole-v1, 10 seeds (2026-12-02, schedule "steps"): the greedy policy
+# scored 500 on every seed for a2c (600k steps per seed, 8.2 s of training), ldn (600k, 20.1 s)
+# and ppo (200k, 11.2 s). CartPole-v1 counts as solved at 475.
 @pytest.mark.slow
-@pytest.mark.parametrize("algo", ["a2c", "ppo"])
+@pytest.mark.parametrize("algo", ["a2c", "ldn", "ppo"])
 def test_fast_preset_solves_cartpole_v1_on_every_seed(algo, tmp_path):
-    config = from_preset("fast", env="cartpole-v1", algo=algo, seeds=10, k=(1.0,))
+    config = from_preset("fast", env="cartpole-v1", algo=algo, seeds=10)
     summary = train(config, tmp_path, checkpoint_every=0, quiet=True)
     evals = [r["eval_return"] for r in summary["runs"]]
     assert min(evals) >= 475, evals
