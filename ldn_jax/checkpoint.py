@@ -5,14 +5,21 @@ from __future__ import annotations
 from pathlib import Path
 
 import jax
+import jax.numpy as jnp
 import orbax.checkpoint as ocp
 
 from ldn_jax.train import TrainState
 
 
-def _to_storable(state: TrainState) -> TrainState:
+def _raw(state: TrainState) -> TrainState:
     # Typed PRNG keys are stored as their raw uint32 data.
     return state.replace(key=jax.random.key_data(state.key))
+
+
+def _to_storable(state: TrainState) -> TrainState:
+    # orbax refuses zero-size arrays (a MuJoCo env state carried by schedule "steps" has
+    # some): each is stored as one zero and restored to its empty shape.
+    return jax.tree.map(lambda x: jnp.zeros((1,), x.dtype) if x.size == 0 else x, _raw(state))
 
 
 def save(path: Path, state: TrainState) -> None:
@@ -26,4 +33,6 @@ def restore(path: Path, like: TrainState) -> TrainState:
     """Restore into the structure, shapes and dtypes of `like` (which may be abstract)."""
     target = jax.eval_shape(_to_storable, like)
     state = ocp.StandardCheckpointer().restore(Path(path).resolve(), target)
+    empty = lambda x, shape: jnp.zeros(shape.shape, shape.dtype) if shape.size == 0 else x
+    state = jax.tree.map(empty, state, jax.eval_shape(_raw, like))
     return state.replace(key=jax.random.wrap_key_data(state.key))

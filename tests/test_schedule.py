@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from experiments.training import Interrupted, train
+from ldn_jax import checkpoint
 from ldn_jax.config import from_preset, validate
 from ldn_jax.metrics import run_crossing, threshold_crossing
 from ldn_jax.rollout import play_episodes
@@ -236,3 +237,26 @@ def test_a_quota_of_imagined_episodes_plays_each_workers_owed_episodes(played):
     )
     np.testing.assert_array_equal(episodes.lengths, [0, 3, 6, 20])
     np.testing.assert_array_equal(episodes.ended, [0, 1, 2, 6])
+
+
+def test_a_mujoco_workers_state_checkpoints_with_its_empty_arrays(tmp_path):
+    """The native engine's state has zero-size arrays, which orbax alone refuses."""
+    config = validate(
+        from_preset(
+            "paper",
+            env="inverted_pendulum",
+            algo="a2c",
+            seeds=1,
+            schedule="steps",
+            iteration_steps=10,
+            steps=1000,
+        )
+    )
+    trainer = Trainer(config)
+    state = trainer.init_batch()
+    assert any(x.size == 0 for x in jax.tree.leaves(state.workers))
+    checkpoint.save(tmp_path / "state", state)
+    back = checkpoint.restore(tmp_path / "state", jax.eval_shape(trainer.init_batch))
+    for a, b in zip(jax.tree.leaves(_host(back)), jax.tree.leaves(_host(state)), strict=True):
+        assert a.shape == b.shape
+        np.testing.assert_array_equal(a, b)
