@@ -23,10 +23,15 @@ def test_masked_share_counts_the_segments_the_longest_run_forces_on_every_run():
 
 
 def test_ratios_to_ceiling_divide_real_and_real_plus_imagined_rates():
-    rows = [{"algo": "ldn", "env_steps_per_s": 50, "imagined_steps_per_s": 25}]
-    (ratio,) = stages.ratios_to_ceiling(rows, {"env_steps_per_s": 200})
-    assert ratio == {
+    rows = [
+        {"algo": "ldn", "env_steps_per_s": 50, "imagined_steps_per_s": 25},
+        {"algo": "a2c", "schedule": "steps", "env_steps_per_s": 150, "imagined_steps_per_s": 0},
+    ]
+    episodes, steps = stages.ratios_to_ceiling(rows, {"env_steps_per_s": 200})
+    assert episodes == {
         "algo": "ldn",
+        "schedule": "episodes",  # a row without one is the literal schedule's
         "real_over_ceiling": 0.25,
         "real_plus_imagined_over_ceiling": 0.375,
     }
+    assert (steps["schedule"], steps["real_over_ceiling"]) == ("steps", 0.75)
