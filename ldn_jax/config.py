@@ -325,7 +325,8 @@ class Config:
             model.setdefault("ld", "ensemble")
         gains = tuple(overrides.get("k", preset.get("k", Config.k)))
         overrides["k"] = gains if algorithm.uses_model and stop == "ld" else gains[:1]
-        top = {k: v for k, v in preset.items() if k not in ("agent", "model", "episodes", "k")}
+        skip = ("agent", "model", "episodes", "k", *overrides)  # what is given wins
+        top = {k: v for k, v in preset.items() if k not in skip}
         return cls(
             preset=name, **top, **overrides, agent=AgentConfig(**agent), model=ModelConfig(**model)
         )
