@@ -310,17 +310,48 @@ def test_cpu_scale_runs_every_mujoco_task_on_its_budget():
         assert common.budget_text(config) == f"{n:,} {unit}"
 
 
-def test_episodes_to_the_top_reads_the_per_episode_moving_return():
-    from experiments.paper import table5
+def test_the_halfcheetah_rules_take_their_own_budget_seeds_and_directories():
+    from experiments.paper import stops
 
-    # One seed, two iterations of two workers; the moving return after each episode.
-    history = {
-        "moving_after": np.array([[[[1.0, 5.0], [9.0, 12.0]]]]),
-        "lengths": np.array([[[[3, 4], [10, 20]]]]),
-        "env_steps": np.array([[[7, 37]]]),
+    scale, results = report.common.SCALES["cpu"], Path("r")
+    for name in ("ld", "m2ac", "none"):
+        algo, model, sweep, _ = stops.RULES[name]
+        config = stops.config_of(scale, "halfcheetah", algo, model, sweep)
+        assert config.steps == 1_000_000 and config.seeds == 10 and config.k == (1.0,)
+        out = stops.dir_of(results, scale, config, name)
+        assert out == Path(f"r/runs/cpu/stops-halfcheetah-{name}")  # not Table 4's 200k run
+    with pytest.raises(ValueError, match="not its whole state"):
+        stops.config_of(scale, "halfcheetah", *stops.RULES["oracle"][:3])
+    # The smoke scale keeps its own budgets; CartPole's rules keep the scale's episodes.
+    smoke = stops.config_of(report.common.SCALES["smoke"], "inverted_pendulum", "a2c-model", {})
+    assert smoke.steps is None and smoke.episodes == 8
+    assert stops.config_of(scale, "cartpole-v2", "a2c-model", {}).episodes == scale.episodes
+
+
+def test_the_rules_study_on_some_envs_keeps_the_other_envs_rows(tmp_path, monkeypatch):
+    """`stops.py --envs E` trains only E's rules and keeps the stored rows of the others."""
+    from experiments.paper import stops
+
+    common = report.common
+    scale = common.SCALES["cpu"]
+    (tmp_path / "rules").mkdir()
+    old = {"cartpole-v2": {"rows": ["old v2"]}, "halfcheetah": {"rows": ["old cheetah"]}}
+    stored = {**common.scale_record(scale), "k": 1.0, "envs": old}
+    (tmp_path / "rules" / "rules.json").write_text(json.dumps(stored))
+    with pytest.raises(SystemExit, match="--envs ant: this scale's rules study runs cartpole-v2"):
+        stops.rules_study(tmp_path, scale, ("ant",))
+    trained = []
+    fresh = lambda results, scale, env: trained.append(env) or {"rows": [f"new {env}"]}
+    monkeypatch.setattr(stops, "env_rules", fresh)
+    monkeypatch.setattr(stops, "rules_figure", lambda record, path: None)
+    record = stops.rules_study(tmp_path, scale, ("halfcheetah",))
+    assert trained == ["halfcheetah"]  # inverted_pendulum: not asked for and not stored
+    assert record["envs"] == {
+        "cartpole-v2": old["cartpole-v2"],
+        "halfcheetah": {"rows": ["new halfcheetah"]},
     }
-    assert table5.episodes_to(history, 9.0) == [3]  # the first episode of iteration 2
-    assert table5.episodes_to(history, 12.5) == [None]
+    written = json.loads((tmp_path / "rules" / "rules.json").read_text())
+    assert list(written["envs"]) == ["cartpole-v2", "halfcheetah"]
 
 
 def test_smoke_calibration(smoke):
