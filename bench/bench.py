@@ -371,6 +371,11 @@ def main() -> None:
         top = stages.ceiling(**size)
         rows = result.get("training") or both_schedules(train_size)
         result["ceiling"] = {**top, "ratios": stages.ratios_to_ceiling(rows, top)}
+        update = stages.ppo_update(seeds=size.get("seeds", 10))
+        update["update_only_over_ceiling"] = round(
+            update["update_only_env_steps_per_s"] / top["env_steps_per_s"], 3
+        )
+        result["ceiling"]["ppo_update"] = update
     if "stages" in sections:
         size = dict(runs=6, warm_episodes=80) if args.quick else {}
         result["stages"] = [stages.stages(algo, **size) for algo in ALGOS]

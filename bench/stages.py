@@ -132,6 +132,50 @@ def ceiling(seeds: int = 10, workers: int = 8, segments: int = 1000) -> dict:
     }
 
 
+def ppo_update(seeds: int = 10, env_name: str = "cartpole-v1") -> dict:
+    """What PPO's update alone costs, against the gradients it must compute.
+
+    One rollout's rows per seed (`n_steps` x workers, the `paper` preset's PPO: 5 epochs x 5
+    minibatches), vmapped over `seeds`: the seconds of `PPO.learn`, and of the bare
+    gradient of PPO's loss over the same rows once per epoch (no optimiser, no shuffle, one
+    minibatch of all rows). Their ratio says how much of the update is overhead; the rows
+    over `learn`'s seconds are the env steps/s PPO could reach if its rollout cost nothing.
+    """
+    from ldn_jax.learners.ppo import PPO, Batch
+
+    config = from_preset("paper", env=env_name, algo="ppo", seeds=seeds)
+    cfg = config.agent
+    env, params = envs.make(env_name)
+    ppo = PPO(cfg, env.observation_size(params), env.action_spec(params))
+    rows = cfg.n_steps * config.workers
+    keys = jax.random.split(jax.random.key(0), 4)
+    states = jax.vmap(ppo.init)(jax.random.split(keys[0], seeds))
+    normal = lambda key, shape: jax.random.normal(key, (seeds, rows, *shape))
+    batch = Batch(
+        obs=normal(keys[1], (env.observation_size(params),)),
+        action=jax.random.bernoulli(keys[2], 0.5, (seeds, rows)).astype(jnp.int32),
+        log_prob=jnp.full((seeds, rows), -0.69),
+        value=jnp.zeros((seeds, rows)),
+        advantage=normal(keys[3], ()),
+        target=normal(keys[1], ()),
+        weight=jnp.ones((seeds, rows)),
+    )
+    shuffle = jax.random.split(keys[2], seeds)
+    learn = _best_seconds(jax.jit(jax.vmap(ppo.learn)), states, batch, shuffle, repeats=10)
+    grad = jax.jit(jax.vmap(lambda s, b: jax.grad(ppo.loss, has_aux=True)(s.params, b)[0]))
+    gradients = _best_seconds(grad, states, batch, repeats=10) * cfg.epochs
+    return {
+        "what": f"PPO.learn on one rollout ({cfg.epochs} epochs x {cfg.minibatches} "
+        f"minibatches of {rows} rows per seed), against its bare gradients",
+        "seeds": seeds,
+        "rows_per_seed": rows,
+        "learn_s": round(learn, 5),
+        "gradients_s": round(gradients, 5),
+        "learn_over_gradients": round(learn / gradients, 2),
+        "update_only_env_steps_per_s": round(seeds * rows / learn),
+    }
+
+
 def ratios_to_ceiling(rows: list[dict], ceiling_row: dict) -> list[dict]:
     """Each training row's real and real + imagined env steps/s over the ceiling's."""
     top = ceiling_row["env_steps_per_s"]

@@ -4,6 +4,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 
@@ -35,3 +36,15 @@ def test_ratios_to_ceiling_divide_real_and_real_plus_imagined_rates():
         "real_plus_imagined_over_ceiling": 0.375,
     }
     assert (steps["schedule"], steps["real_over_ceiling"]) == ("steps", 0.75)
+
+
+def test_ppo_update_times_one_rollout_of_the_paper_presets_ppo_against_its_gradients():
+    row = stages.ppo_update(seeds=1)
+    assert row["rows_per_seed"] == 100 * 8  # n_steps x workers
+    assert "5 epochs x 5 minibatches" in row["what"]
+    assert row["learn_s"] > 0 and row["gradients_s"] > 0
+    # (the seconds are rounded to 10 us in the row)
+    assert row["update_only_env_steps_per_s"] == pytest.approx(800 / row["learn_s"], rel=5e-3)
+    assert row["learn_over_gradients"] == pytest.approx(
+        row["learn_s"] / row["gradients_s"], abs=0.01
+    )
