@@ -451,7 +451,13 @@ class Trainer:
     def init_batch(self) -> TrainState:
         """States `[P, S]` (P: `config.points`, the K values without a sweep): seed i gets
         key i at every point (common random numbers). In a sweep each point starts from
-        its own values (an optimiser state may hold its learning rate)."""
+        its own values (an optimiser state may hold its learning rate).
+
+        Jitted, one program instead of some hundred eager ops (about 1.5 s per process on
+        CPU): the same values to the bit (`networks.normal_init`)."""
+        return jax.jit(self._init_batch)()
+
+    def _init_batch(self) -> TrainState:
         keys = jax.vmap(jax.random.key)(jnp.arange(self.config.seeds))
         if self.config.sweep:
             init = lambda point: jax.vmap(self._at_point(point)[0].init_state)(keys)
