@@ -16,12 +16,12 @@ reading: mean LD, the share of imagined steps with LD >= 0.9 in the first 10k im
 and after, imagined steps per episode, episodes to threshold against A3C-Model with a
 Mann-Whitney test, and Figure 5 redrawn.
 
-Stopping rules (`--stop`; cartpole-v2 and inverted_pendulum): the LD draw (the literal and the
-Figure 5 reading, and the ensemble estimator), the M2AC-style mask and the oracle (each one
-vmapped program over its parameter), fixed horizons h in {1, 5, 25}, and none (A3C-Model).
-Per rule: episodes (CartPole) or env steps (MuJoCo) to threshold, final moving return,
-imagined steps per real step and training seconds, each as an IQM with a bootstrap 95%
-interval (`experiments.stats`), and a verdict against A3C-Model.
+Stopping rules (`--stop`; cartpole-v2, inverted_pendulum and halfcheetah): the LD draw (the
+literal and the Figure 5 reading, and the ensemble estimator), the M2AC-style mask and the
+oracle (each one vmapped program over its parameter), fixed horizons h in {1, 5, 25}, and
+none (A3C-Model). Per rule: episodes (CartPole) or env steps (MuJoCo) to threshold, final
+moving return, imagined steps per real step and training seconds, each as an IQM with a
+bootstrap 95% interval (`experiments.stats`), and a verdict against A3C-Model.
 
 Writes DIR/stops/stops.json, stops.csv, readings.png and rules.png; REPORT.md's sections
 "The readings of eq. 3" and "Stopping rules" are made from them (`report.py`).
@@ -378,7 +378,8 @@ def rules_figure(record: dict, path: Path) -> None:
     for row_axes, env in zip(axes, envs_here, strict=True):
         data = record["envs"][env]
         rows = [r for r in data["rows"] if "label" in r]
-        labels = [r["label"] for r in rows]
+        # The steps panel's IQM is over the seeds that reached the threshold: say how many.
+        labels = [f"{r['label']} ({r['reached']}/{r['runs']})" for r in rows]
         y = np.arange(len(rows))[::-1]
         for ax, metric, xlabel in (
             (row_axes[0], "to_threshold", f"{data['unit'].replace('_', ' ')} to threshold"),
