@@ -100,8 +100,14 @@ CONFIG_FLAGS = {
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     d = Config()
     p = Parser(description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--env", help=f"one of: {', '.join(envs.names())} (default {d.env})")
-    p.add_argument("--algo", help=f"one of: {', '.join(ALGORITHMS)} (default {d.algo})")
+    p.add_argument(
+        "--env",
+        help=f"one of: {', '.join(envs.names())} (default {d.env}); a comma list with "
+        "--algo's makes a grid: each env x algo trained in turn in this process",
+    )
+    p.add_argument(
+        "--algo", help=f"one of: {', '.join(ALGORITHMS)} (default {d.algo}); or a comma list"
+    )
     p.add_argument("--seeds", type=int, help=f"number of vmapped seeds 0..N-1 (default {d.seeds})")
     p.add_argument("--k", help=f"comma-separated learning-degree gains K (default {_gains(d.k)})")
     p.add_argument(
@@ -232,7 +238,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="print every config field with its type and its value under the other flags "
         "given, and exit",
     )
-    p.add_argument("--out", help="run directory (default runs/ENV-ALGO-TIME)")
+    p.add_argument(
+        "--out",
+        help="run directory (default runs/ENV-ALGO-TIME); of a grid, the directory of its "
+        "runs, DIR/ENV-ALGO (default runs/grid-TIME): the same command again keeps the "
+        "finished ones and resumes an interrupted one",
+    )
     p.add_argument("--resume", metavar="DIR", help="continue the run in DIR from its checkpoint")
     p.add_argument(
         "--checkpoint-every", type=int, default=20, help="chunks between checkpoints (0: end only)"
@@ -289,6 +300,35 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     if args.distributed and not (args.out or args.resume or args.dry_run):
         raise UsageError("--distributed needs --out (every process must name the same run)")
     return args
+
+
+def grid(args: argparse.Namespace) -> list[argparse.Namespace] | None:
+    """`--env A,B --algo X,Y`: one namespace per (env, algorithm), env-major, the flags
+    otherwise as given; None for one env and one algorithm (a plain run)."""
+
+    def names(flag: str) -> list[str | None]:
+        text = getattr(args, flag)
+        if text is None or "," not in text:
+            return [text]
+        items = [item.strip() for item in text.split(",")]
+        if "" in items:
+            raise UsageError(f"--{flag} {text}: an empty name in the list")
+        twice = sorted({item for item in items if items.count(item) > 1})
+        if twice:
+            raise UsageError(f"--{flag} {text}: {', '.join(twice)} given twice")
+        return items
+
+    env_names, algos = names("env"), names("algo")
+    if len(env_names) * len(algos) == 1:
+        return None
+    for flag in ("resume", "dry_run", "list_fields", "distributed"):
+        if getattr(args, flag):
+            raise UsageError(f"{flag_name(flag)} takes one --env and one --algo, not a list")
+    return [
+        argparse.Namespace(**{**vars(args), "env": env, "algo": algo})
+        for env in env_names
+        for algo in algos
+    ]
 
 
 def build_config(args: argparse.Namespace) -> Config:

@@ -13,6 +13,7 @@ This file is the command: flags and config (`experiments.flags`), runtime setup
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import signal
 import sys
@@ -33,14 +34,27 @@ from ldn_jax.run_dir import CheckpointWriteError, RunDir, RunDirError
 
 def main(argv: list[str] | None = None) -> int:
     """The training command; returns the exit code (2: bad input, one line on stderr)."""
-    held = contextlib.ExitStack()  # the run directory's lock, for the life of the process
-    run = None
     try:
         args = flags.parse_args(argv)
+        members = flags.grid(args)
         if args.distributed:
             runtime.initialize_distributed(args)
-        writer = jax.process_index() == 0
         cache = runtime.enable_compile_cache(args.compile_cache)
+        if members is None:
+            return train_one(args, cache)
+        members = grid_members(members, args)
+    except (UsageError, RunDirError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    return train_grid(members, cache)
+
+
+def train_one(args, cache, stop: Stop | None = None) -> int:
+    """One run: `args` as parsed, for one env and algorithm; returns the exit code."""
+    held = contextlib.ExitStack()  # the run directory's lock, for the life of the run
+    run = None
+    writer = jax.process_index() == 0
+    try:
         if args.resume:
             run = RunDir(args.resume)
             if writer and run.path.is_dir() and not args.dry_run:
@@ -69,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
         options = TrainOptions(
             checkpoint_every=args.checkpoint_every,
             quiet=args.quiet,
-            stop=Stop().install(),
+            stop=stop or Stop().install(),
             resume=bool(args.resume),
             logger=logger,
             mesh=mesh,
@@ -98,6 +112,51 @@ def main(argv: list[str] | None = None) -> int:
         held.close()
     if writer:
         summaries.closing_lines(config, summary, run)
+    return 0
+
+
+def grid_members(members: list, args) -> list:
+    """The runs of a grid (`--env A,B --algo X,Y`), each with its `--out`: DIR/ENV-ALGO under
+    the grid's `--out` (default runs/grid-STAMP). The same command again goes on where it
+    stopped: a member whose directory holds a finished run is kept, one that was interrupted
+    resumes (its settings checked as `--resume` checks them), the rest start. Every member's
+    config is built and checked before any trains, so a bad name costs nothing."""
+    root = Path(args.out or Path("runs") / f"grid-{time.strftime('%Y%m%d-%H%M%S')}")
+    placed = []
+    for member in members:
+        config = flags.build_config(member)
+        member.out = str(root / f"{config.env}-{config.algo}")
+        there = RunDir(member.out)
+        if there.is_finished():
+            as_resumed = argparse.Namespace(**{**vars(member), "resume": member.out})
+            flags.check_resume_flags(as_resumed, there.read_config())
+            print(f"kept: {there} (finished)")
+            continue
+        if there.holds_run():
+            member.resume = member.out
+            flags.check_resume_flags(member, there.read_config())
+        placed.append(member)
+    return placed
+
+
+def train_grid(members: list, cache) -> int:
+    """Train a grid's runs one after another in this process (imports, the backend and
+    programs shared between runs are paid once); stops at the first that does not finish,
+    saying what did not start."""
+    stop = Stop().install()
+    for i, member in enumerate(members):
+        name = Path(member.out).name
+        if not member.quiet:
+            print(f"[{i + 1}/{len(members)}] {name}" + (" (resumed)" if member.resume else ""))
+        code = train_one(member, cache, stop)
+        if code != 0:
+            rest = [Path(m.out).name for m in members[i + 1 :]]
+            if rest:
+                print(
+                    f"not started: {', '.join(rest)}; the same command again goes on from here",
+                    file=sys.stderr,
+                )
+            return code
     return 0
 
 

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from experiments.training import Stop
 from ldn_jax import load_policy
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -185,3 +186,67 @@ def test_config_json_of_a_run_reruns_it(run_dir, tmp_path):
     assert json.loads((out / "config.json").read_text()) == json.loads(
         (run_dir / "config.json").read_text()
     )
+
+
+GRID = ["--env", "cartpole-v0,cartpole-v2", "--algo", "a2c", "--seeds", "2", "--episodes", "24"]
+GRID += ["--workers", "4", "--chunk", "2", "--quiet", "--compile-cache", "none"]
+
+
+def _metrics(run: Path) -> list[dict]:
+    lines = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines()]
+    return [{k: v for k, v in line.items() if k != "wall_seconds"} for line in lines]
+
+
+def test_a_grid_trains_each_run_as_alone_and_the_same_command_goes_on_after_a_stop(
+    tmp_path, monkeypatch, capsys
+):
+    """`--env A,B`: one run per env in DIR/ENV-ALGO, each as its single run; stopped in its
+    first run, the same command resumes it, starts the next, and then keeps both; with
+    other settings it is refused."""
+    from experiments import run as command
+    from tests.test_resume import StopAfter
+
+    grid, alone = tmp_path / "grid", tmp_path / "alone"
+    single = [a if a != "cartpole-v0,cartpole-v2" else "cartpole-v2" for a in GRID]
+    assert command.main([*single, "--out", str(alone)]) == 0
+
+    monkeypatch.setattr(command, "Stop", lambda: StopAfter(1))
+    assert command.main([*GRID, "--out", str(grid)]) == 128 + 2  # SIGINT after one chunk
+    err = capsys.readouterr().err
+    assert f"--resume {grid / 'cartpole-v0-a2c'}" in err
+    assert "not started: cartpole-v2-a2c; the same command again goes on" in err
+    assert not (grid / "cartpole-v2-a2c").exists()
+
+    monkeypatch.setattr(command, "Stop", Stop)
+    assert command.main([*GRID, "--out", str(grid)]) == 0
+    out = capsys.readouterr().out
+    assert "[1/2] cartpole-v0-a2c (resumed)" not in out  # --quiet: no headers
+    assert _metrics(grid / "cartpole-v2-a2c") == _metrics(alone)
+    assert json.loads((grid / "cartpole-v0-a2c" / "summary.json").read_text())["resumes"] == 1
+
+    before = (grid / "cartpole-v2-a2c" / "metrics.jsonl").stat().st_mtime_ns
+    assert command.main([*GRID, "--out", str(grid)]) == 0
+    out = capsys.readouterr().out
+    assert out.count("kept: ") == 2 and "(finished)" in out
+    assert (grid / "cartpole-v2-a2c" / "metrics.jsonl").stat().st_mtime_ns == before
+    changed = [a if a != "24" else "32" for a in GRID]  # another budget: not the same grid
+    assert command.main([*changed, "--out", str(grid)]) == 2
+    assert "does not match the run being resumed" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["--env", "cartpole-v0,pong"], "unknown env 'pong'"),
+        (["--algo", "a2c,a2c"], "--algo a2c,a2c: a2c given twice"),
+        (["--env", "cartpole-v0,"], "--env cartpole-v0,: an empty name in the list"),
+        (["--algo", "a2c,ppo", "--dry-run"], "--dry-run takes one --env and one --algo"),
+    ],
+)
+def test_bad_grids_exit_2_with_one_line_before_training(args, needle, tmp_path, capsys):
+    from experiments import run as command
+
+    code = command.main([*args, "--out", str(tmp_path / "g"), "--compile-cache", "none"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and needle in err, err
+    assert not (tmp_path / "g").exists()
