@@ -45,6 +45,7 @@ SECTIONS = (
     "rejax",
     "compile",
     "scaling",
+    "seeds",
     "mujoco",
 )
 
@@ -269,6 +270,94 @@ def seed_scaling(batches, episodes: int = 80) -> dict:
     return result
 
 
+SEED_COUNTS = (10, 100, 1000)
+"""The `seeds` section's vmapped seed counts (the issue's 10, 100 and 1,000)."""
+
+
+def seed_counts(
+    counts=SEED_COUNTS, algos=("ldn", "ppo"), env: str = "cartpole-v1", timed: int = 2
+) -> dict:
+    """ldn and ppo at the `fast` preset (schedule "steps": nothing masked, so every computed
+    step is a real one) at growing vmapped seed counts: env steps/s per program once it runs
+    warm, what an accelerator's width buys over these cores (`bench/gpu.sh` runs this section
+    on a GPU).
+
+    Each program is compiled ahead of time, run for one warm-up iteration, then timed over
+    `timed` one-iteration chunks (each worker plays the env's step limit, 500 steps on
+    cartpole-v1, so a chunk is 4,000 real steps per seed). A run's steps budget covers all
+    of them, so no run freezes while being timed.
+    """
+    rows = []
+    for algo in algos:
+        for seeds in counts:
+            probe = from_preset("fast", env=env, algo=algo, seeds=seeds)
+            per_iteration = probe.steps_per_iteration * probe.workers
+            config = from_preset(
+                "fast",
+                env=env,
+                algo=algo,
+                seeds=seeds,
+                steps=(1 + timed) * per_iteration,
+                chunk_iterations=1,
+            )
+            trainer = Trainer(config)
+            states, k = trainer.init_batch(), trainer.k_values()
+            compiled, lower_s, compile_s = compile_chunk(trainer, states, k)
+            start = time.perf_counter()
+            states, _ = jax.block_until_ready(compiled(states, k))
+            warm_s = time.perf_counter() - start
+            before = (int(states.env_steps.sum()), int(states.imagined_steps.sum()))
+            start = time.perf_counter()
+            for _ in range(timed):
+                states, _ = jax.block_until_ready(compiled(states, k))
+            seconds = time.perf_counter() - start
+            real = int(states.env_steps.sum()) - before[0]
+            imagined = int(states.imagined_steps.sum()) - before[1]
+            memory = compiled.memory_analysis()
+            rows.append(
+                {
+                    "algo": algo,
+                    "seeds": seeds,
+                    "compile_s": round(lower_s + compile_s, 2),
+                    "first_chunk_s": round(warm_s, 3),
+                    "timed_s": round(seconds, 3),
+                    "env_steps": real,
+                    "env_steps_per_s": round(real / seconds),
+                    "imagined_steps_per_s": round(imagined / seconds),
+                    "argument_mb": round(memory.argument_size_in_bytes / 2**20, 1),
+                    "temp_mb": round(memory.temp_size_in_bytes / 2**20, 1),
+                }
+            )
+    return {
+        "env": env,
+        "preset": "fast",
+        "device": jax.devices()[0].device_kind,
+        "steps_per_iteration_per_seed": per_iteration,
+        "timed_iterations": timed,
+        "rows": rows,
+        "ratios": _seed_ratios(rows),
+    }
+
+
+def _seed_ratios(rows: list[dict]) -> list[dict]:
+    """Each algorithm's env steps/s at every seed count over its rate at the smallest."""
+    out = []
+    for algo in dict.fromkeys(row["algo"] for row in rows):
+        mine = [row for row in rows if row["algo"] == algo]
+        base = min(mine, key=lambda row: row["seeds"])
+        for row in mine:
+            out.append(
+                {
+                    "algo": algo,
+                    "seeds": row["seeds"],
+                    "env_steps_per_s_over_fewest_seeds": round(
+                        row["env_steps_per_s"] / base["env_steps_per_s"], 2
+                    ),
+                }
+            )
+    return out
+
+
 def compile_cold_warm(seeds: int, n_k: int) -> dict:
     """The same training program compiled in two fresh processes sharing an empty persistent
     cache: the first compiles (cold), the second loads it (warm)."""
@@ -339,6 +428,12 @@ def main() -> None:
         default=os.environ.get("BRAX_PYTHON"),
         help="a python with brax 0.14, for the mujoco section's brax-generalized rows",
     )
+    parser.add_argument(
+        "--seed-counts",
+        type=lambda text: tuple(int(v) for v in text.split(",")),
+        help="section seeds: the vmapped seed counts, e.g. 10,100 (default 10,100,1000; "
+        "--quick 10,100)",
+    )
     parser.add_argument("--probe", metavar="CACHE", help=argparse.SUPPRESS)
     parser.add_argument("--probe-shape", default="10x3", help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -350,6 +445,7 @@ def main() -> None:
     result: dict = {
         "jax": jax.__version__,
         "backend": jax.default_backend(),
+        "device_kind": jax.devices()[0].device_kind,
         "devices": jax.device_count(),
         "cpus": os.cpu_count(),
         "machine": platform.machine(),
@@ -391,6 +487,9 @@ def main() -> None:
     if "scaling" in sections:
         batches = [(1, 1), (10, 1), (10, 3)] + ([] if args.quick else [(100, 1)])
         result["seed_scaling"] = seed_scaling(batches)
+    if "seeds" in sections:
+        counts = args.seed_counts or ((10, 100) if args.quick else SEED_COUNTS)
+        result["seed_counts"] = seed_counts(counts)
     result["peak_rss_mb"] = round(_peak_rss_mb())
     text = json.dumps(result, indent=1)
     print(text)

@@ -28,6 +28,7 @@ from ldn_jax.learners import LEARNERS
 from ldn_jax.learners.base import LearnerState
 from ldn_jax.learners.ppo import Memory
 from ldn_jax.learning_degree import ld_histogram
+from ldn_jax.prng import written_out
 from ldn_jax.rollout import Completed, Episodes, Workers, play_episodes, play_steps, workers_init
 from ldn_jax.sharding import compiler_options, shard_seeds
 
@@ -500,6 +501,8 @@ class Trainer:
 
 def _jit_seeds(fn, mesh: Mesh | None, bitwise: bool, **jit_kwargs):
     """`fn` jitted on one device, or split over the mesh's devices, with the XLA options
-    of `sharding.compiler_options`."""
+    of `sharding.compiler_options`; its programs lower threefry written out on CPU
+    (`prng.written_out`)."""
     sharded = fn if mesh is None else shard_seeds(fn, mesh, bitwise)
-    return jax.jit(sharded, compiler_options=compiler_options(mesh, bitwise), **jit_kwargs)
+    jitted = jax.jit(sharded, compiler_options=compiler_options(mesh, bitwise), **jit_kwargs)
+    return written_out(jitted)  # threefry without its loop on CPU, the same draws (`prng`)

@@ -48,3 +48,19 @@ def test_ppo_update_times_one_rollout_of_the_paper_presets_ppo_against_its_gradi
     assert row["learn_over_gradients"] == pytest.approx(
         row["learn_s"] / row["gradients_s"], abs=0.01
     )
+
+
+def test_seed_ratios_divide_each_algorithms_rate_by_its_rate_at_the_fewest_seeds():
+    import bench
+
+    rows = [
+        {"algo": "ldn", "seeds": 100, "env_steps_per_s": 300},
+        {"algo": "ldn", "seeds": 10, "env_steps_per_s": 200},
+        {"algo": "ppo", "seeds": 10, "env_steps_per_s": 50},
+        {"algo": "ppo", "seeds": 1000, "env_steps_per_s": 25},
+    ]
+    ratios = {
+        (r["algo"], r["seeds"]): r["env_steps_per_s_over_fewest_seeds"]
+        for r in bench._seed_ratios(rows)
+    }
+    assert ratios == {("ldn", 100): 1.5, ("ldn", 10): 1.0, ("ppo", 10): 1.0, ("ppo", 1000): 0.5}
