@@ -72,3 +72,22 @@ def test_the_trainers_chunk_is_written_out_and_computes_what_jaxs_lowering_compu
     fresh = lambda: jax.tree.map(jnp.copy, states)  # the chunk donates its states
     for a, b in zip(values(chunk(fresh(), k)), values(chunk.jitted(fresh(), k)), strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("n", [1, 2, 800, 1_625, 1_626, 5_000])
+def test_permutation_is_jaxs_permutation_bit_for_bit(n):
+    # 1,626 is the first size JAX shuffles in two rounds of sorts.
+    keys = jax.random.split(jax.random.key(n), 3)
+    ours = jax.jit(jax.vmap(lambda key: prng.permutation(key, n)))(keys)
+    jaxs = jax.vmap(lambda key: jax.random.permutation(key, n))(keys)
+    assert ours.dtype == jaxs.dtype
+    np.testing.assert_array_equal(ours, jaxs)
+
+
+def test_stable_argsort_of_bits_orders_equal_keys_by_index():
+    # Few distinct keys, so most are tied: the order among equal keys is the index order.
+    bits = jax.random.randint(jax.random.key(0), (2, 1_000), 0, 7).astype(jnp.uint32)
+    ours = jax.jit(jax.vmap(prng._stable_argsort_bits))(bits)
+    np.testing.assert_array_equal(ours, jnp.argsort(bits, axis=-1, stable=True))
+    extremes = jnp.array([0xFFFFFFFF, 0, 0xFFFFFFFF, 1, 0], jnp.uint32)
+    np.testing.assert_array_equal(prng._stable_argsort_bits(extremes), [1, 4, 3, 0, 2])

@@ -15,6 +15,7 @@ import jax.numpy as jnp
 import optax
 from flax import struct
 
+from ldn_jax import prng
 from ldn_jax.config import AgentConfig
 from ldn_jax.learners.base import (
     ActorCritic,
@@ -193,7 +194,7 @@ class PPO(ActorCritic):
         batch = jax.tree.map(lambda x: jnp.pad(x, [(0, pad)] + [(0, 0)] * (x.ndim - 1)), batch)
 
         def epoch(state: LearnerState, key: Array):
-            order = jax.random.permutation(key, rows + pad)
+            order = prng.permutation(key, rows + pad)
             shuffled = jax.tree.map(
                 lambda x: x[order].reshape((cfg.minibatches, size, *x.shape[1:])), batch
             )
