@@ -37,6 +37,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         args = flags.parse_args(argv)
         members = flags.grid(args)
+        runtime.make_host_devices(args)
         if args.distributed:
             runtime.initialize_distributed(args)
         cache = runtime.enable_compile_cache(args.compile_cache)

@@ -40,6 +40,28 @@ def enable_compile_cache(spec: str | None) -> Path | None:
     return path
 
 
+HOST_DEVICES_FLAG = "--xla_force_host_platform_device_count"
+
+
+def make_host_devices(args: argparse.Namespace) -> None:
+    """`--devices N` on one host: give JAX's CPU backend N devices, so that the seeds can be
+    split over the cores (XLA runs each device's program on its own thread).
+
+    JAX reads this once, when its backend starts, so it is set first thing; a count that
+    XLA_FLAGS already gives, `--distributed` (one device per process's host) and a backend
+    already started (the command called in-process) are left as they are. On GPU or TPU the
+    mesh is made of the accelerators, and the extra CPU devices stay unused.
+    """
+    if args.distributed or not (args.devices or "").isdigit() or int(args.devices) < 2:
+        return
+    if HOST_DEVICES_FLAG in os.environ.get("XLA_FLAGS", ""):
+        return
+    try:
+        jax.config.update("jax_num_cpu_devices", int(args.devices))
+    except RuntimeError:  # the backend has started: `device_mesh` says what is missing
+        pass
+
+
 def initialize_distributed(args: argparse.Namespace) -> None:
     try:
         sharding.initialize_distributed(args.coordinator, args.num_processes, args.process_id)

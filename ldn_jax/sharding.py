@@ -55,7 +55,8 @@ def seed_mesh(devices: int | None = None) -> Mesh:
     if not 1 <= count <= len(available):
         raise ValueError(
             f"{count} devices asked for, {len(available)} {available[0].platform} device(s) "
-            "available (on CPU, XLA_FLAGS=--xla_force_host_platform_device_count=N makes N)"
+            "available (on CPU, `jax.config.update('jax_num_cpu_devices', N)` before JAX "
+            "starts makes N, as the training command's --devices N does)"
         )
     return Mesh(np.asarray(available[:count]), (SEEDS_AXIS,))
 
