@@ -4,6 +4,7 @@ compiled training chunk (with `--dry-run`'s report of what it costs)."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import time
 from pathlib import Path
@@ -56,10 +57,9 @@ def make_host_devices(args: argparse.Namespace) -> None:
         return
     if HOST_DEVICES_FLAG in os.environ.get("XLA_FLAGS", ""):
         return
-    try:
+    # If the backend has started, this raises, and `device_mesh` says what is missing.
+    with contextlib.suppress(RuntimeError):
         jax.config.update("jax_num_cpu_devices", int(args.devices))
-    except RuntimeError:  # the backend has started: `device_mesh` says what is missing
-        pass
 
 
 def initialize_distributed(args: argparse.Namespace) -> None:
