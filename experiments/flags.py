@@ -259,7 +259,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--wandb-project", metavar="NAME", help="wandb project (default ldn-jax)")
     p.add_argument(
         "--devices",
-        help="devices to split the seeds over: N or 'all' (default 1; with --distributed, all)",
+        help="devices to split the seeds over: N or 'all' (default 1; with --distributed, all); "
+        "on CPU, N makes N host devices, one thread each, so the seeds use every core",
     )
     p.add_argument(
         "--bitwise",
