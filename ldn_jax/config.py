@@ -604,8 +604,8 @@ greedy eval of 10 episodes in gymnasium (`ldn-jax eval`), 2 cores:
   600k (20.1 s), ppo 10 of 10 at 200k (11.2 s); with the 3,000-episode budget instead a2c
   was 9 of 10 (one seed's greedy policy scored 10) and ppo 9 of 10 at 800 episodes.
 - which seed, if any, ends below 475 depends on the last bits: rerun later the same day (the
-  same code, then the MLP's reordered kernel-gradient sums, then two devices), each algorithm gave 8, 9 or
-  10 of 10 (README, "A solved CartPole").
+  same code, then the MLP's reordered kernel-gradient sums, then two devices), each
+  algorithm gave 8, 9 or 10 of 10 (README, "A solved CartPole").
 For CartPole only: MuJoCo's defaults are already ours."""
 
 
