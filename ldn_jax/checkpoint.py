@@ -30,8 +30,16 @@ def save(path: Path, state: TrainState) -> None:
 
 
 def restore(path: Path, like: TrainState) -> TrainState:
-    """Restore into the structure, shapes and dtypes of `like` (which may be abstract)."""
+    """Restore into the structure, shapes and dtypes of `like` (which may be abstract).
+
+    In one process the arrays come back on its first device, whatever devices saved them
+    (a run trained with `--devices 2` loads for `ldn-jax eval`, or resumes, with one; the
+    trainer then places them). Across processes, on the devices that saved them."""
     target = jax.eval_shape(_to_storable, like)
+    if jax.process_count() == 1:
+        device = jax.sharding.SingleDeviceSharding(jax.devices()[0])
+        on_device = lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=device)
+        target = jax.tree.map(on_device, target)
     state = ocp.StandardCheckpointer().restore(Path(path).resolve(), target)
     empty = lambda x, shape: jnp.zeros(shape.shape, shape.dtype) if shape.size == 0 else x
     state = jax.tree.map(empty, state, jax.eval_shape(_raw, like))

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from experiments.training import train
+from ldn_jax import load_policy
 from ldn_jax.config import from_preset
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -106,6 +107,10 @@ def test_two_devices_give_the_one_device_run(reference, tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert (summary["devices"], summary["bitwise"]) == (2, False)
     _assert_same_run(out, reference)
+    # This process has one device: the policy loads all the same, each seed its own.
+    obs = np.array([0.01, 0.02, 0.03, 0.04], np.float32)
+    for seed in range(CONFIG["seeds"]):
+        assert load_policy(out, seed=seed, k=2.0)(obs) == load_policy(reference, seed, k=2.0)(obs)
 
 
 @pytest.mark.parametrize(  # 2 seeds per device; 1, run twice (slow: the default suite's time)
