@@ -299,6 +299,7 @@ def seed_counts(
                 seeds=seeds,
                 steps=(1 + timed) * per_iteration,
                 chunk_iterations=1,
+                solved_return=None,  # throughput: no greedy evaluations, no run stops
             )
             trainer = Trainer(config)
             states, k = trainer.init_batch(), trainer.k_values()

@@ -62,6 +62,8 @@ def metric_lines(
                     "losses": {name: finite_or_none(at(name)) for name in losses},
                     "wall_seconds": round(wall_seconds, 3),
                 }
+                if "greedy_return" in metrics:  # `solved_return`: the chunk's evaluation
+                    line["greedy_return"] = finite_or_none(at("greedy_return"))
                 lines.append(json.dumps(line))
     return lines
 
@@ -126,6 +128,7 @@ def summarize(config: Config, history: dict, eval_returns, states, session: dict
                     "seconds_to_threshold": round(seconds, 3) if seconds else None,
                     "final_moving_return": finite_or_none(history["moving_return"][ki, seed, -1]),
                     "eval_return": float(eval_returns[ki, seed]),
+                    "solved": solved_at(config, history, (ki, seed), chunk_ends),
                     "diverged": None
                     if failure[ki, seed] == 0
                     else {
@@ -143,12 +146,30 @@ def summarize(config: Config, history: dict, eval_returns, states, session: dict
         "real_episodes": int(history["episodes"][..., -1].sum()),
         "env_steps": total_steps,
         "threshold": threshold,
+        "solved_return": config.solved_return,
         "compile_seconds": round(session["compile_seconds"], 3),
         "train_seconds": round(train_seconds, 3),
         "env_steps_per_second": round(total_steps / train_seconds, 1),
         "imagined_steps": int(history["imagined_steps"][..., -1].sum()),
         "resumes": session["resumes"],
         "runs": runs,
+    }
+
+
+def solved_at(config: Config, history: dict, run: tuple[int, int], chunk_ends) -> dict | None:
+    """Where one run's greedy evaluation first reached `config.solved_return`, the run
+    stopping there: `{"episodes", "env_steps", "seconds"}` (seconds: the batch's wall time
+    at the end of that chunk); None if it never did (or no `solved_return`)."""
+    if config.solved_return is None:
+        return None
+    reached = np.flatnonzero(history["greedy_return"][run] >= config.solved_return)
+    if not len(reached):
+        return None
+    at = reached[0]
+    return {
+        "episodes": int(history["episodes"][run][at]),
+        "env_steps": int(history["env_steps"][run][at]),
+        "seconds": round(chunk_ends[at // config.chunk_iterations], 3),
     }
 
 
@@ -172,6 +193,8 @@ def statistics(config: Config, runs: list[dict]) -> list[dict]:
         here = [r for r in runs if all(r[n] == v for n, v in point.items())]
         entry = {**point, "runs": len(here)}
         entry["reached"] = sum(r["episodes_to_threshold"] is not None for r in here)
+        if config.solved_return is not None:
+            entry["solved"] = sum(r["solved"] is not None for r in here)
         for name in STATISTICS:
             values = [r[name] for r in here if r[name] is not None]
             entry[name] = stats.estimate(values)
@@ -218,6 +241,11 @@ def closing_lines(config: Config, summary: dict, run: RunDir) -> None:
             f"final moving return {final_text}, greedy eval return {evals} "
             f"(IQM [95% CI] over {len(runs)} runs)"
         )
+    if config.solved_return is not None:
+        solved = [r["solved"] for r in runs if r["solved"] is not None]
+        outcome += f"; {len(solved)}/{len(runs)} solved (greedy {config.solved_return:g})"
+        if solved:
+            outcome += f", the last after {max(s['seconds'] for s in solved):.1f}s"
     print(
         f"{config.env} {config.algo}: {outcome}; compile {summary['compile_seconds']:.1f}s, "
         f"train {summary['train_seconds']:.1f}s, eval {summary['eval_seconds']:.1f}s "

@@ -186,8 +186,9 @@ def _train_chunks(config, options, run, chunk_fn, states, k, history, session, p
                 if not last and (due or stopping):
                     name = f"chunk_{chunk + 1:05d}"
                     run.save_checkpoint(name, states, history, session, writer)
+                solving = config.solved_return is not None  # runs may stop early
                 if stopping:
-                    known = chunks if _counted_budget(config) is None else None
+                    known = chunks if _counted_budget(config) is None and not solving else None
                     raise Interrupted(stop.signum or signal.SIGINT, chunk + 1, known)
                 if last:
                     break
@@ -197,15 +198,19 @@ def _train_chunks(config, options, run, chunk_fn, states, k, history, session, p
 
 
 def budget_spent(config: Config, history: dict) -> bool:
-    """With a `steps` budget (or under schedule "steps" an `episodes` one): whether every
-    run has reached it (or was frozen by the non-finite guard) by the last chunk in
-    `history`."""
+    """With a `steps` budget (or under schedule "steps" an `episodes` one), or with
+    `solved_return`: whether every run has stopped by the last chunk in `history`, at its
+    budget, solved, or frozen by the non-finite guard."""
     counted = _counted_budget(config)
-    if counted is None or not history.get(counted[0]):
+    if (counted is None and config.solved_return is None) or not history.get("failure"):
         return False
-    name, budget = counted
-    spent, failure = history[name][-1][..., -1], history["failure"][-1][..., -1]
-    return bool(((spent >= budget) | (failure != 0)).all())
+    stopped = history["failure"][-1][..., -1] != 0
+    if counted is not None:
+        name, budget = counted
+        stopped = stopped | (history[name][-1][..., -1] >= budget)
+    if config.solved_return is not None:
+        stopped = stopped | (history["greedy_return"][-1][..., -1] >= config.solved_return)
+    return bool(stopped.all())
 
 
 def _counted_budget(config: Config) -> tuple[str, int] | None:

@@ -62,6 +62,9 @@ class TrainState:
     non-finite. A failed run is frozen at its last finite state."""
     failed_iteration: Array
     """The iteration whose result was non-finite (0 if none)."""
+    greedy_return: Array | None = None
+    """The greedy policy's mean return at its latest evaluation, after each chunk (NaN
+    before the first); None without `Config.solved_return`."""
 
 
 FAILURES = (
@@ -73,6 +76,11 @@ FAILURES = (
     "episode returns",
 )
 """What the non-finite guard checks, in the order of the bits of `TrainState.failure`."""
+
+
+GREEDY_STREAM = 0x9E37
+"""`jax.random.fold_in` data of the greedy evaluations after each chunk
+(`Config.solved_return`): a branch off the run's key that its training never draws."""
 
 
 IMAGINED_STARTS = 16
@@ -156,6 +164,7 @@ class Trainer:
             key=key,
             failure=zero,
             failed_iteration=zero,
+            greedy_return=None if self.config.solved_return is None else jnp.float32(jnp.nan),
         )
 
     # -- stages ----------------------------------------------------------------------------
@@ -320,12 +329,21 @@ class Trainer:
     def spent(self, state: TrainState) -> Array:
         """Whether a run has reached its `config.steps` budget, or under schedule "steps"
         its `config.episodes` (schedule "episodes" without a steps budget: never, the
-        iteration count is the budget)."""
+        iteration count is the budget), or its greedy policy has solved the task
+        (`config.solved_return`)."""
         if self.config.steps is not None:
-            return state.env_steps >= self.config.steps
-        if self.config.schedule == "steps":
-            return state.episodes >= self.config.episodes
-        return jnp.zeros((), bool)
+            spent = state.env_steps >= self.config.steps
+        elif self.config.schedule == "steps":
+            spent = state.episodes >= self.config.episodes
+        else:
+            spent = jnp.zeros((), bool)
+        return spent | self.solved(state)
+
+    def solved(self, state: TrainState) -> Array:
+        """Whether a run's latest greedy evaluation reached `config.solved_return`."""
+        if self.config.solved_return is None:
+            return jnp.zeros((), bool)
+        return state.greedy_return >= self.config.solved_return
 
     def _failure(self, state: TrainState, metrics: dict) -> Array:
         """The `FAILURES` bits of the quantities of one iteration that are not all finite."""
@@ -414,9 +432,21 @@ class Trainer:
         """`config.chunk_iterations` iterations; metrics stacked `[N, ...]`. `point` is this
         run's learning-degree gain K (eq. 6), or in a sweep `{"k": K, field: value, ...}`."""
         trainer, gain = self._at_point(point)
-        return jax.lax.scan(
+        state, metrics = jax.lax.scan(
             lambda s, _: trainer.iteration(s, gain), state, length=self.config.chunk_iterations
         )
+        if self.config.solved_return is not None:
+            state, metrics = trainer._judge(state, metrics)
+        return state, metrics
+
+    def _judge(self, state: TrainState, metrics: dict) -> tuple[TrainState, dict]:
+        """The greedy evaluation after a chunk (`config.solved_return`), logged as the
+        chunk's last `greedy_return` (NaN before). Its keys branch off the run's own
+        without drawing from them; a stopped run, frozen, scores the same again."""
+        score = self.evaluate(state, jax.random.fold_in(state.key, GREEDY_STREAM))
+        last = jnp.arange(self.config.chunk_iterations) == self.config.chunk_iterations - 1
+        metrics["greedy_return"] = jnp.where(last, score, jnp.nan)
+        return state.replace(greedy_return=score), metrics
 
     def _at_point(self, point) -> tuple[Trainer, Array]:
         if not isinstance(point, dict):
@@ -441,10 +471,14 @@ class Trainer:
             alive = alive & ~(terminated | truncated)
             return (obs, env_state, alive, total), None
 
-        init = (obs, env_state, jnp.ones((n,), bool), jnp.zeros((n,)))
         # A fresh key per env step (the resets keep `key`'s split, as before).
         step_keys = jax.random.split(jax.random.fold_in(key, 1), self.max_steps)
-        (_, _, _, total), _ = jax.lax.scan(body, init, step_keys)
+        init = (jnp.int32(0), obs, env_state, jnp.ones((n,), bool), jnp.zeros((n,)))
+        # Until every episode has ended (early policies fall within tens of steps); the
+        # steps after an episode's end would add nothing.
+        playing = lambda carry: (carry[0] < self.max_steps) & carry[3].any()
+        step_on = lambda carry: (carry[0] + 1, *body(carry[1:], step_keys[carry[0]])[0])
+        total = jax.lax.while_loop(playing, step_on, init)[-1]
         return total.mean()
 
     # -- seeds x K -------------------------------------------------------------------------

@@ -49,7 +49,7 @@ def test_run_dir_files_and_fields(run_dir):
     assert summary["threshold"] == 150.0 and summary["env_steps_per_second"] > 0
     run_fields = {
         "seed", "k", "episodes_to_threshold", "env_steps_to_threshold", "seconds_to_threshold",
-        "final_moving_return", "eval_return", "diverged",
+        "final_moving_return", "eval_return", "solved", "diverged",
     }  # fmt: skip
     assert len(summary["runs"]) == 4 and all(set(r) == run_fields for r in summary["runs"])
 

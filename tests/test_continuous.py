@@ -192,11 +192,17 @@ def test_fast_preset_sets_its_constants_and_budget_and_flags_still_win():
     assert config.agent.gamma == 0.99 and config.agent.reward_scale == 0.1
     assert config.agent.normalize_obs and config.agent.actor_lr == 1e-3
     ppo = from_preset("fast", env="cartpole-v1", algo="ppo")
-    assert ppo.steps == 200_000 and not ppo.agent.normalize_obs and ppo.agent.reward_scale == 1.0
+    assert ppo.steps == 300_000 and not ppo.agent.normalize_obs and ppo.agent.reward_scale == 1.0
     given = from_preset("fast", env="cartpole-v1", algo="ldn", episodes=50, k=(0.5, 1.0))
     assert (given.episodes, given.steps, given.k) == (50, None, (0.5, 1.0))  # flags win
     paper = from_preset("paper", env="cartpole-v1", algo="a2c")
     assert paper.steps is None and paper.schedule == "episodes"
+    # Each CartPole stops where every greedy episode lasts to its step limit.
+    assert [from_preset("fast", env=f"cartpole-v{v}").solved_return for v in range(3)] == [
+        200.0, 500.0, 1000.0
+    ]  # fmt: skip
+    assert paper.solved_return is None
+    assert from_preset("fast", env="cartpole-v1", solved_return=None).solved_return is None
 
 
 def test_continuous_defaults_normalise_the_model():

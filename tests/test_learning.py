@@ -3,7 +3,9 @@
 import numpy as np
 import pytest
 
+from experiments.gym_eval import episode_returns, make_env
 from experiments.training import train
+from ldn_jax import load_policy
 from ldn_jax.config import from_preset
 from ldn_jax.run_dir import RunDir
 
@@ -24,18 +26,23 @@ def test_reaches_150_on_cartpole_v1(algo, tmp_path):
     assert len(reached) >= 3, summary["runs"]
 
 
-# The fast preset on cartpole-v1, 10 seeds (2026-12-02, schedule "steps"): the greedy policy
-# scored 500 on every seed for a2c (600k steps per seed, 8.2 s of training), ldn (600k, 20.1 s)
-# and ppo (200k, 11.2 s). CartPole-v1 counts as solved at 475. Rerun that evening (AMD EPYC,
-# one device): the previous commit 10, 8 and 9 of 10; with the reordered kernel-gradient sums
-# 9 of 10 for each (README, "A solved CartPole").
+# The fast preset on cartpole-v1 (2026-12-02 evening, AMD EPYC, 2 cores). Trained to the
+# budget, the final greedy policies scored >= 475 on 9 or 10 of 10 seeds, depending on the
+# last bits (late falls). Stopped where the greedy policy first scores 500 in the JAX env
+# (`solved_return`): 20 of 20 seeds for each algorithm, on one device and on two, the lowest
+# 477-500 over 20 gymnasium episodes (README, "A solved CartPole").
 @pytest.mark.slow
 @pytest.mark.parametrize("algo", ["a2c", "ldn", "ppo"])
 def test_fast_preset_solves_cartpole_v1_on_every_seed(algo, tmp_path):
     config = from_preset("fast", env="cartpole-v1", algo=algo, seeds=10)
     summary = train(config, tmp_path, checkpoint_every=0, quiet=True)
-    evals = [r["eval_return"] for r in summary["runs"]]
-    assert min(evals) >= 475, evals
+    assert all(r["solved"] is not None for r in summary["runs"]), summary["runs"]
+    # In gymnasium's own CartPole-v1, as `ldn-jax eval` plays it (100 episodes, env seed 0).
+    gym = [
+        episode_returns(make_env("cartpole-v1"), load_policy(tmp_path, seed), 100, 0).mean()
+        for seed in range(10)
+    ]
+    assert min(gym) >= 475, gym
 
 
 # inverted_pendulum, native engine, 2 CPU cores (2026-12-01), 5 seeds, --steps 600000 (the
