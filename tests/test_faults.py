@@ -256,6 +256,7 @@ BAD_INPUT = [
     (["--threshold", "nan"], "threshold must be a finite number, got nan"),
     (["--threshold=-inf"], "threshold must be a finite number, got -inf"),
     (["--threshold", "high"], "argument --threshold: invalid float value: 'high'"),
+    (["--set", "solved_return=inf"], "solved_return must be a finite number (or none), got inf"),
     (["--chunk", "0"], "chunk_iterations must be >= 1"),
     (["--chunk", "-1"], "chunk_iterations must be >= 1"),
     (["--backend", "warp"], "backend must be one of auto, native, mjx"),
