@@ -41,7 +41,7 @@ def without(tmp_path_factory):
 def solving(tmp_path_factory):
     out = tmp_path_factory.mktemp("solving")
     config = from_preset("paper", **CONFIG, solved_return=SOLVED)
-    summary = train(config, out, checkpoint_every=1, quiet=True)
+    summary = train(config, out, checkpoint_every=0, quiet=True)
     return out, summary
 
 
@@ -83,7 +83,7 @@ def test_the_batch_ends_once_every_run_is_solved(tmp_path):
 def test_resume_keeps_the_evaluations_and_the_stop_bitwise(solving, tmp_path):
     config = from_preset("paper", **CONFIG, solved_return=SOLVED)
     with pytest.raises(Interrupted):
-        train(config, tmp_path, checkpoint_every=1, quiet=True, stop=StopAfter(5))
+        train(config, tmp_path, checkpoint_every=0, quiet=True, stop=StopAfter(5))  # saves
     summary = train(read_run_config(tmp_path), tmp_path, quiet=True, resume=True)
     out, reference = solving
     assert _lines(tmp_path) == _lines(out)
