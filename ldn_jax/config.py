@@ -622,8 +622,8 @@ cartpole-v1, greedy eval in gymnasium (`ldn-jax eval`: 100 episodes), 2 cores:
 - schedule "steps", trained to the whole budget (600k; ppo 200k): 10 of 10 each in one
   measurement, then 8, 9 or 10 of 10 as the last bits changed (the same code later, the
   MLP's reordered kernel-gradient sums, two devices): seeds that had learned fell back late.
-- stopped when solved (2026-12-02 evening): every seed of 10 and of 20, on one device and on
-  two, for a2c, ldn and ppo (README, "A solved CartPole").
+- stopped when solved: every seed of 10 and of 20, on one device and on two, for a2c, ldn
+  and ppo (README, "A solved CartPole").
 For CartPole only: MuJoCo's defaults are already ours."""
 
 
