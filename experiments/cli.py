@@ -20,8 +20,9 @@ import numpy as np
 
 from experiments import compare as comparison
 from experiments import gym_eval, run
-from experiments.flags import Parser, UsageError
+from experiments.flags import Parser
 from experiments.plots import compare_runs
+from experiments.settings import UsageError
 from ldn_jax import load_policy
 from ldn_jax.policy import point_index
 from ldn_jax.run_dir import RunDir, RunDirError

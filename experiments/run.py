@@ -6,9 +6,10 @@ Writes config.json, metrics.jsonl, summary.json, curves.png and checkpoints/ int
 `--devices N` splits the seeds over N devices, `--distributed` over several hosts;
 `--dry-run` compiles the training program and prints its cost without training.
 
-This file is the command: flags and config (`experiments.flags`), runtime setup
-(`experiments.runtime`), the host loop (`experiments.training`), what a run reports
-(`experiments.summaries`) and the run directory (`ldn_jax.run_dir`) each live in their own.
+This file is the command: flags and config (`experiments.flags`, fields set by name in
+`experiments.settings`), runtime setup (`experiments.runtime`), the host loop
+(`experiments.training`), what a run reports (`experiments.summaries`) and the run
+directory (`ldn_jax.run_dir`) each live in their own.
 """
 
 from __future__ import annotations
@@ -24,9 +25,9 @@ import jax
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from experiments import flags, runtime, summaries
-from experiments.flags import UsageError
+from experiments import flags, runtime, settings, summaries
 from experiments.loggers import NullLogger, make_logger
+from experiments.settings import UsageError
 from experiments.training import Interrupted, Stop, TrainOptions, train
 from ldn_jax.config import Config
 from ldn_jax.run_dir import CheckpointWriteError, RunDir, RunDirError
@@ -65,7 +66,7 @@ def train_one(args, cache, stop: Stop | None = None) -> int:
         else:
             config = flags.build_config(args)
         if args.list_fields:
-            print("\n".join(flags.list_fields(config)))
+            print("\n".join(settings.list_fields(config)))
             return 0
         mesh = runtime.device_mesh(args, config.seeds)
         if args.dry_run:

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import jax
 
-from experiments.flags import UsageError
+from experiments.settings import UsageError
 from ldn_jax import sharding
 from ldn_jax.config import Config
 from ldn_jax.train import Trainer

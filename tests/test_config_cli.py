@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from experiments import flags
-from experiments.flags import UsageError
+from experiments.settings import UsageError
 from ldn_jax.config import Config, fields, from_preset, get_field
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from experiments import flags
-from experiments.flags import UsageError
+from experiments.settings import UsageError
 from ldn_jax.config import AgentConfig, ModelConfig, from_preset, validate
 from ldn_jax.dynamics import Dynamics
 from ldn_jax.imagination import (

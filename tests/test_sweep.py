@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from experiments import flags
-from experiments.flags import UsageError
+from experiments.settings import UsageError
 from experiments.training import Interrupted, train
 from ldn_jax import load_policy
 from ldn_jax.config import from_preset, get_field, sweepable, validate
