@@ -1,0 +1,136 @@
+"""REPORT.md's building blocks: the `Section` a result becomes (paragraphs, a `Table`,
+`Bullets`) and its markdown, the numbers' formats, the statistics' sentences, and every
+section's title (`TITLES`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from scipy import stats
+
+from experiments import stats as iqm_stats
+from experiments.paper import common
+
+
+def fmt(value, digits: int = 1) -> str:
+    if value is None:
+        return "–"
+    if isinstance(value, int):
+        return f"{value:,}"
+    return f"{value:,.{digits}f}"
+
+
+def pm(mean, sd, digits: int = 1) -> str:
+    if mean is None:
+        return "–"
+    return f"{fmt(mean, digits)} ± {fmt(sd, digits)}" if sd is not None else fmt(mean, digits)
+
+
+def iqm(record: dict, digits: int = 0) -> str:
+    """A record's IQM with its bootstrap 95% interval, `512 [480, 540]` ("–" in result files
+    from before the IQM)."""
+    return iqm_stats.text({"iqm": record.get("iqm"), "ci95": record.get("ci95")}, digits)
+
+
+def better(x: list, y: list, lower_is_better: bool) -> str:
+    """The probability that a seed of X does better than a seed of Y, with its bootstrap
+    95% interval, over the values that are not None."""
+    x, y = [v for v in x if v is not None], [v for v in y if v is not None]
+    value = iqm_stats.improvement(x, y, lower_is_better=lower_is_better)
+    return f"P(better) = {iqm_stats.improvement_text(value)}"
+
+
+def algo_name(algo: str) -> str:
+    return common.PAPER_ALGOS.get(algo, algo)
+
+
+@dataclass
+class Table:
+    """A markdown table: a header row and rows of already formatted cells."""
+
+    header: list[str]
+    rows: list[list[str]] = field(default_factory=list)
+
+
+@dataclass
+class Bullets:
+    items: list[str]
+
+
+@dataclass
+class Section:
+    """One `##` section of the report: its blocks (paragraphs, tables, bullet lists; figures
+    are linked from the paragraphs) and the findings it adds to the summary at the top."""
+
+    title: str
+    blocks: list[str | Table | Bullets] = field(default_factory=list)
+    findings: list[str] = field(default_factory=list)
+
+    @classmethod
+    def missing(cls, title: str, script: str) -> Section:
+        """A section whose result file is not there yet."""
+        return cls(title, [f"Not produced yet (run `{script}`)."])
+
+
+def markdown_table(table: Table) -> list[str]:
+    """`| a | b |` lines: the header, the separator, one line per row."""
+    line = lambda cells: "| " + " | ".join(cells) + " |"
+    return [line(table.header), "|" + "---|" * len(table.header), *map(line, table.rows)]
+
+
+def render_section(section: Section) -> list[str]:
+    lines = [f"## {section.title}", ""]
+    for block in section.blocks:
+        if isinstance(block, Table):
+            lines += markdown_table(block)
+        elif isinstance(block, Bullets):
+            lines += [f"- {item}" for item in block.items]
+        else:
+            lines.append(block)
+        lines.append("")
+    return lines
+
+
+def mann_whitney_p(x: list, y: list) -> float | None:
+    """Two-sided Mann-Whitney p over the values that are not None (None: too few, < 2 each).
+    The report's one significance test."""
+    x, y = [v for v in x if v is not None], [v for v in y if v is not None]
+    if len(x) < 2 or len(y) < 2:
+        return None
+    return float(stats.mannwhitneyu(x, y).pvalue)
+
+
+def mann_whitney(x: list, y: list) -> str:
+    p = mann_whitney_p(x, y)
+    return "too few runs to test" if p is None else f"Mann-Whitney p = {p:.2g}"
+
+
+def budget(record: dict) -> str:
+    """A run's budget per seed as its result file states it (files from before step
+    budgets give episodes only)."""
+    return record.get("budget") or f"{record['episodes']:,} episodes"
+
+
+def by_env(rows: list[dict]) -> dict[str, dict[str, dict]]:
+    """A result's finished rows by env, then algorithm: `{env: {algo: row}}`."""
+    out: dict[str, dict[str, dict]] = {}
+    for r in rows:
+        if r["status"] == "done":
+            out.setdefault(r["env"], {})[r["algo"]] = r
+    return out
+
+
+TITLES = {
+    "table2": "Table 2: episodes to threshold",
+    "figure4": "Figure 4: learning curves",
+    "table3": "Table 3: wall-clock seconds to threshold",
+    "figure5": "Figure 5: learning degree over imagined steps",
+    "figure9": "Figure 9: the gain K",
+    "calibration": "LD calibration: does the learning degree know when the model is wrong?",
+    "readings": "The readings of eq. 3",
+    "rules": "Stopping rules for imagination, side by side",
+    "table4": "Table 4: MuJoCo, A3C-Model vs MBRL-LDN",
+    "table5": "Table 5: MuJoCo, PPO2 vs PPO2-Model vs PPO2-LDN",
+    "targets": "MuJoCo at the default budgets: the project's targets",
+}
+"""Every section's title."""

@@ -1,0 +1,245 @@
+"""REPORT.md's MuJoCo sections: Tables 4 and 5 and the project's targets at the default
+budgets."""
+
+from __future__ import annotations
+
+from experiments.paper.report_format import (
+    TITLES,
+    Section,
+    Table,
+    algo_name,
+    better,
+    budget,
+    by_env,
+    fmt,
+    iqm,
+    mann_whitney,
+    mann_whitney_p,
+    pm,
+)
+
+
+def _pending_note(table: dict) -> list[str]:
+    pending = [r for r in table["rows"] if r["status"] != "done"]
+    if not pending:
+        return []
+    names = sorted({r["env"] for r in pending}, key=[r["env"] for r in pending].index)
+    reason = pending[0]["reason"].removeprefix(f"{pending[0]['env']} ")
+    return [f"Pending at this scale ({reason}): {', '.join(names)}."]
+
+
+def table4_section(table: dict) -> Section:
+    intro = (
+        f'Final moving return (our reading of "total moving reward"), {table["seeds"]} seeds '
+        "per run, continuous actions (the model predicts standardised state deltas; README). "
+        "The paper's values exceed what some tasks can score, so compare the two "
+        "algorithms, not the values. Curves: ![table 4](table4/table4.png)"
+    )
+    header = ["env", "algorithm", "budget", "episodes per seed", "env steps per seed"]
+    header += ["final moving return: mean ± s.d.", "IQM [95% CI]", "min", "max"]
+    header += ["greedy eval return", "paper"]
+    done = [r for r in table["rows"] if r["status"] == "done"]
+    rows = [
+        [
+            r["env"],
+            algo_name(r["algo"]),
+            budget(r),
+            fmt(r.get("episodes_per_seed", r["episodes"]), 0),
+            fmt(r["env_steps_per_seed"], 0),
+            pm(r["mean"], r["sd"]),
+            iqm(r),
+            fmt(r["min"]),
+            fmt(r["max"]),
+            pm(r["eval_return"]["mean"], r["eval_return"]["sd"]),
+            fmt(r["paper"]),
+        ]
+        for r in done
+    ]
+    findings = []
+    for env, algos in by_env(done).items():
+        if set(algos) != {"a2c-model", "ldn"}:
+            continue
+        model, ldn = algos["a2c-model"], algos["ldn"]
+        x, y = ldn["final_moving_returns"], model["final_moving_returns"]
+        p, test = mann_whitney_p(x, y), mann_whitney(x, y)
+        if p is None or p >= 0.05:
+            verdict = "no significant difference (the paper: MBRL-LDN higher): NOT reproduced"
+        elif ldn["mean"] > model["mean"]:
+            verdict = "REPRODUCED (MBRL-LDN higher, as in the paper)"
+        else:
+            verdict = "NOT reproduced: A3C-Model higher (the paper: MBRL-LDN higher)"
+        findings.append(
+            f"Table 4, {env} ({budget(ldn)}): MBRL-LDN {ldn['mean']:.1f} vs "
+            f"A3C-Model {model['mean']:.1f} final moving return ({test}, "
+            f"{better(x, y, False)}; paper "
+            f"{ldn['paper']} vs {model['paper']}): {verdict}."
+        )
+    title = TITLES["table4"]
+    return Section(title, [intro, Table(header, rows), *_pending_note(table)], findings)
+
+
+def table5_section(table: dict) -> Section:
+    intro = (
+        f"Episodes to reach the top; the paper does not define the top, ours is {table['top']} "
+        f"(the dashed line in the figure). {table['seeds']} seeds per run. Curves: "
+        "![table 5](table5/table5.png)"
+    )
+    header = ["env", "algorithm", "the top", "episodes to the top: mean ± s.d.", "IQM [95% CI]"]
+    header += ["min", "max", "reached", "final moving return", "IQM [95% CI]"]
+    header += ["greedy eval return", "paper"]
+    done = [r for r in table["rows"] if r["status"] == "done"]
+    rows = [
+        [
+            r["env"],
+            algo_name(r["algo"]),
+            f"{r['top']:.0f}",
+            pm(r["mean"], r["sd"]),
+            iqm(r),
+            fmt(r["min"], 0),
+            fmt(r["max"], 0),
+            f"{r['reached']}/{r['runs']}",
+            pm(r["final_moving_return"]["mean"], r["final_moving_return"]["sd"]),
+            iqm(r["final_moving_return"]),
+            pm(r["eval_return"]["mean"], r["eval_return"]["sd"]),
+            fmt(r["paper"]),
+        ]
+        for r in done
+    ]
+    findings = [table5_finding(env, algos) for env, algos in by_env(done).items()]
+    title = TITLES["table5"]
+    return Section(title, [intro, Table(header, rows), *_pending_note(table)], findings)
+
+
+def table5_finding(env: str, algos: dict[str, dict]) -> str:
+    means = {a: r["mean"] for a, r in algos.items() if r["mean"] is not None}
+    if not means:
+        return f"Table 5, {env}: no run reached the top within the budget."
+    order = sorted(means, key=means.get)
+    ours = " < ".join(f"{algo_name(a)} ({means[a]:.0f})" for a in order)
+    reached = ", ".join(f"{algo_name(a)} {r['reached']}/{r['runs']}" for a, r in algos.items())
+    verdict = (
+        "REPRODUCED (PPO2-LDN fewest, as in the paper)"
+        if order[0] == "ppo-ldn" and len(means) == len(algos)
+        else "NOT reproduced (the paper: PPO2-LDN fewest)"
+    )
+    final = {a: r["final_moving_return"]["mean"] for a, r in algos.items()}
+    unreached = [a for a, r in algos.items() if r["reached"] == 0]
+    unreached = (
+        "; never reached the top: "
+        + ", ".join(f"{algo_name(a)} (final moving return {final[a]:.0f})" for a in unreached)
+        if unreached
+        else ""
+    )
+    tests = "; ".join(
+        f"PPO2-LDN vs {algo_name(a)}: "
+        + mann_whitney(algos["ppo-ldn"]["episodes_to_top"], algos[a]["episodes_to_top"])
+        + ", "
+        + better(algos["ppo-ldn"]["episodes_to_top"], algos[a]["episodes_to_top"], True)
+        for a in ("ppo", "ppo-model")
+        if a in algos and "ppo-ldn" in algos
+    )
+    imagined = ", ".join(
+        f"{algo_name(a)} {r['imagined_steps_per_seed']:,.0f}"
+        + (
+            f" (mean LD {r['ld_mean_last_iterations']:.2f})"
+            if r.get("ld_mean_last_iterations") is not None and a.endswith("ldn")
+            else ""
+        )
+        for a, r in algos.items()
+        if r.get("imagined_steps_per_seed")
+    )
+    imagined = f" Imagined steps per seed: {imagined}." if imagined else ""
+    return (
+        f"Table 5, {env}: mean episodes to the top {ours} ({tests}). Reached: "
+        f"{reached}{unreached}: {verdict}.{imagined}"
+    )
+
+
+def _span(values: list, digits: int = 0) -> str:
+    """ "low to high" of the values given, "all N" where they are equal."""
+    have = [v for v in values if v is not None]
+    if not have:
+        return "–"
+    if min(have) == max(have):
+        return f"{have[0]:,.{digits}f} (all {len(have)})"
+    return f"{min(have):,.{digits}f} to {max(have):,.{digits}f}"
+
+
+def targets_section(record: dict) -> Section:
+    intro = (
+        "What the defaults deliver (not a table of the paper): each run at its default budget "
+        "(`DEFAULT_STEPS`), as `python experiments/run.py --env ENV --algo ALGO --seeds N` "
+        "starts it. Curves: ![targets](targets/targets.png)"
+    )
+    rows = [r for r in record["rows"] if r["status"] == "done"]
+    pendulum = [r for r in rows if r["env"] == "inverted_pendulum"]
+    cheetah = [r for r in rows if r["env"] == "halfcheetah"]
+    parts: list = [intro]
+    findings = []
+    if pendulum:
+        header = ["algorithm", "budget", "seeds >= 900", "env steps to 900", "highest"]
+        header += ["final moving return", "greedy eval", "training s", "target met"]
+        parts.append(
+            Table(
+                header,
+                [
+                    [
+                        r["algo"],
+                        r["budget"],
+                        f"{r['reached']}/{r['seeds']}",
+                        _span(r["steps_to_level"]),
+                        _span(r["highest"], 1),
+                        _span(r["final_moving_return"]),
+                        _span(r["eval_return"]),
+                        f"{r['train_seconds']:.0f}",
+                        "yes" if r["met"] else "NO",
+                    ]
+                    for r in pendulum
+                ],
+            )
+        )
+        met = sum(r["met"] for r in pendulum)
+        findings.append(
+            f"Targets, inverted_pendulum: {met} of {len(pendulum)} algorithms reach a moving "
+            "return of 900 on at least 4 of 5 seeds within the default budget in under 15 "
+            "minutes of training ("
+            + ", ".join(f"{r['algo']} {r['reached']}/{r['seeds']}" for r in pendulum)
+            + ")."
+        )
+    if cheetah:
+        header = ["algorithm", "budget", "runs", "mean moving return: first -> final"]
+        header += ["final, per run", "greedy eval, mean", "wall s", "target", "met"]
+        target = {
+            "ldn": "rise >= 1,000 in under 30 min",
+            "ppo": "mean final >= 2,000",
+        }
+        table = []
+        for r in cheetah:
+            runs = len(r["final_moving_return"])
+            evals = sum(r["eval_return"]) / runs
+            table.append(
+                [
+                    r["algo"],
+                    r["budget"],
+                    f"{r['seeds']} seeds x {len(r['k'])} K" if len(r["k"]) > 1 else str(runs),
+                    f"{r['first_mean_moving_return']:,.0f} -> {r['final_mean_moving_return']:,.0f}",
+                    _span(r["final_moving_return"]),
+                    f"{evals:,.0f}",
+                    f"{r['wall_seconds']:.0f}",
+                    target.get(r["algo"], ""),
+                    "yes" if r["met"] else "NO",
+                ]
+            )
+            findings.append(
+                f"Targets, halfcheetah {r['algo']}: mean moving return "
+                f"{r['first_mean_moving_return']:,.0f} -> {r['final_mean_moving_return']:,.0f} "
+                f"over {runs} runs in {r['wall_seconds'] / 60:.0f} minutes "
+                f"({target.get(r['algo'], '')}: {'met' if r['met'] else 'NOT met'})."
+            )
+        parts.append(Table(header, table))
+    pending = [r for r in record["rows"] if r["status"] != "done"]
+    if pending:
+        parts.append(
+            "Pending at this scale: " + ", ".join(f"{r['env']} {r['algo']}" for r in pending) + "."
+        )
+    return Section(TITLES["targets"], parts, findings)
