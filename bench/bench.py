@@ -35,6 +35,9 @@ from ldn_jax.train import Trainer  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "bench"))
 import stages  # noqa: E402
+from mujoco_section import mujoco_section  # noqa: E402
+from seeds import SEED_COUNTS, seed_counts, seed_scaling  # noqa: E402
+from stages import ALGOS  # noqa: E402
 
 SECTIONS = (
     "env",
@@ -101,9 +104,6 @@ def cartpole_env_steps(n_envs: int, auto_reset: bool, steps: int = 1000) -> dict
         "steps_per_s": round(n_envs * steps / run_s),
         "compile_s": round(compile_s, 3),
     }
-
-
-ALGOS = ("a2c", "a2c-model", "ldn", "ppo", "ppo-model", "ppo-ldn")
 
 
 def training(
@@ -216,147 +216,6 @@ def sweep_vs_separate(seeds: int = 10, episodes: int = 400, algo: str = "a2c") -
         "separate_compile_seconds": round(sum(c for c, _ in separate), 2),
         "speedup": round(separate_total / sweep_total, 2),
     }
-
-
-def seed_scaling(batches, episodes: int = 80) -> dict:
-    """ldn on cartpole-v1 for a short fixed budget at several vmapped batch sizes.
-
-    `batches` holds (seeds, number of K values). Wall seconds per chunk show how the cost
-    of one compiled program grows with the batch it is vmapped over.
-    """
-    rows = []
-    for seeds, n_k in batches:
-        config = from_preset(
-            "paper",
-            env="cartpole-v1",
-            algo="ldn",
-            seeds=seeds,
-            k=(0.5, 1.0, 2.0)[:n_k] if n_k > 1 else (1.0,),
-            episodes=episodes,
-            workers=8,
-            chunk_iterations=5,
-        )
-        trainer = Trainer(config)
-        states, k = trainer.init_batch(), trainer.k_values()
-        compiled, lower_s, compile_s = compile_chunk(trainer, states, k)
-        chunk_s = []
-        for _ in range(config.iterations // config.chunk_iterations):
-            start = time.perf_counter()
-            states, _ = jax.block_until_ready(compiled(states, k))
-            chunk_s.append(round(time.perf_counter() - start, 3))
-        memory = compiled.memory_analysis()
-        env_steps = int(states.env_steps.sum())
-        rows.append(
-            {
-                "seeds": seeds,
-                "k_values": n_k,
-                "runs": seeds * n_k,
-                "compile_s": round(lower_s + compile_s, 2),
-                "chunk_s": chunk_s,
-                "train_s": round(sum(chunk_s), 3),
-                "train_s_per_run": round(sum(chunk_s) / (seeds * n_k), 4),
-                "env_steps": env_steps,
-                "env_steps_per_s": round(env_steps / sum(chunk_s)),
-                "argument_mb": round(memory.argument_size_in_bytes / 2**20, 1),
-                "temp_mb": round(memory.temp_size_in_bytes / 2**20, 1),
-            }
-        )
-    result: dict = {"env": "cartpole-v1", "algo": "ldn", "episodes": episodes, "rows": rows}
-    by_shape = {(row["seeds"], row["k_values"]): row for row in rows}
-    if (10, 3) in by_shape and (1, 1) in by_shape:
-        result["train_s_10x3_over_1x1"] = round(
-            by_shape[10, 3]["train_s"] / by_shape[1, 1]["train_s"], 2
-        )
-    return result
-
-
-SEED_COUNTS = (10, 100, 1000)
-"""The `seeds` section's vmapped seed counts (the issue's 10, 100 and 1,000)."""
-
-
-def seed_counts(
-    counts=SEED_COUNTS, algos=("ldn", "ppo"), env: str = "cartpole-v1", timed: int = 2
-) -> dict:
-    """ldn and ppo at the `fast` preset (schedule "steps": nothing masked, so every computed
-    step is a real one) at growing vmapped seed counts: env steps/s per program once it runs
-    warm, what an accelerator's width buys over these cores (`bench/gpu.sh` runs this section
-    on a GPU).
-
-    Each program is compiled ahead of time, run for one warm-up iteration, then timed over
-    `timed` one-iteration chunks (each worker plays the env's step limit, 500 steps on
-    cartpole-v1, so a chunk is 4,000 real steps per seed). A run's steps budget covers all
-    of them, so no run freezes while being timed.
-    """
-    rows = []
-    for algo in algos:
-        for seeds in counts:
-            probe = from_preset("fast", env=env, algo=algo, seeds=seeds)
-            per_iteration = probe.steps_per_iteration * probe.workers
-            config = from_preset(
-                "fast",
-                env=env,
-                algo=algo,
-                seeds=seeds,
-                steps=(1 + timed) * per_iteration,
-                chunk_iterations=1,
-                solved_return=None,  # throughput: no greedy evaluations, no run stops
-            )
-            trainer = Trainer(config)
-            states, k = trainer.init_batch(), trainer.k_values()
-            compiled, lower_s, compile_s = compile_chunk(trainer, states, k)
-            start = time.perf_counter()
-            states, _ = jax.block_until_ready(compiled(states, k))
-            warm_s = time.perf_counter() - start
-            before = (int(states.env_steps.sum()), int(states.imagined_steps.sum()))
-            start = time.perf_counter()
-            for _ in range(timed):
-                states, _ = jax.block_until_ready(compiled(states, k))
-            seconds = time.perf_counter() - start
-            real = int(states.env_steps.sum()) - before[0]
-            imagined = int(states.imagined_steps.sum()) - before[1]
-            memory = compiled.memory_analysis()
-            rows.append(
-                {
-                    "algo": algo,
-                    "seeds": seeds,
-                    "compile_s": round(lower_s + compile_s, 2),
-                    "first_chunk_s": round(warm_s, 3),
-                    "timed_s": round(seconds, 3),
-                    "env_steps": real,
-                    "env_steps_per_s": round(real / seconds),
-                    "imagined_steps_per_s": round(imagined / seconds),
-                    "argument_mb": round(memory.argument_size_in_bytes / 2**20, 1),
-                    "temp_mb": round(memory.temp_size_in_bytes / 2**20, 1),
-                }
-            )
-    return {
-        "env": env,
-        "preset": "fast",
-        "device": jax.devices()[0].device_kind,
-        "steps_per_iteration_per_seed": per_iteration,
-        "timed_iterations": timed,
-        "rows": rows,
-        "ratios": _seed_ratios(rows),
-    }
-
-
-def _seed_ratios(rows: list[dict]) -> list[dict]:
-    """Each algorithm's env steps/s at every seed count over its rate at the smallest."""
-    out = []
-    for algo in dict.fromkeys(row["algo"] for row in rows):
-        mine = [row for row in rows if row["algo"] == algo]
-        base = min(mine, key=lambda row: row["seeds"])
-        for row in mine:
-            out.append(
-                {
-                    "algo": algo,
-                    "seeds": row["seeds"],
-                    "env_steps_per_s_over_fewest_seeds": round(
-                        row["env_steps_per_s"] / base["env_steps_per_s"], 2
-                    ),
-                }
-            )
-    return out
 
 
 def compile_cold_warm(seeds: int, n_k: int) -> dict:
@@ -495,106 +354,6 @@ def main() -> None:
     text = json.dumps(result, indent=1)
     print(text)
     Path(args.out).write_text(text + "\n")
-
-
-MUJOCO_TRAIN = {
-    "inverted_pendulum": (ALGOS, {"seeds": 10, "episodes": 80}, ("native",)),
-    "halfcheetah": (("ppo", "ldn"), {"seeds": 10, "episodes": 8}, ("native", "mjx")),
-}
-"""What the mujoco section trains: every algorithm on inverted_pendulum (10 seeds, 80
-episodes: early, short episodes), ppo and ldn on halfcheetah on both engines (10 seeds, one
-iteration of 8 x 1,000 steps each)."""
-
-MUJOCO_ENV_TASKS = ("halfcheetah", "inverted_pendulum", "ant")
-MUJOCO_ENV_SIZES = (8, 80, 640)
-MUJOCO_ENV_STEPS = {"native": 100, "rollout": 100, "mjx": 20, "generalized": 20}
-"""Steps per timed call: MJX is 10-50x slower on CPU, so it takes fewer to keep the section
-within minutes; rates are per env step either way."""
-
-
-def mujoco_section(quick: bool = False, brax_python: str | None = None) -> dict:
-    """Raw env steps/s per physics path at 8 / 80 / 640 envs (native, `mujoco.rollout` from
-    numpy, mjx, brax generalized when `brax_python` has brax), gymnasium's single env, how far
-    native and mjx drift apart (`mujoco_drift.py`), and training steps/s: each in a fresh
-    subprocess, so compiles do not pile up in one process's memory. `quick`: native and
-    rollout on halfcheetah at 80 envs, ldn on inverted_pendulum."""
-    here = Path(__file__).resolve().parent
-    rows: dict = {"env": [], "train": [], "ratios": []}
-    tasks, sizes = (("halfcheetah",), (80,)) if quick else (MUJOCO_ENV_TASKS, MUJOCO_ENV_SIZES)
-    backends = ("native", "rollout") if quick else ("native", "rollout", "mjx", "generalized")
-    for task in tasks:
-        cmd = [str(here / "mujoco_envs.py"), "--task", task]
-        rows["env"].append(
-            _last_json([sys.executable, *cmd, "--backend", "gymnasium", "--steps", "2000"])
-        )
-        for n in sizes:
-            rates = {}
-            for backend in backends:
-                python = sys.executable
-                if backend == "generalized":
-                    if not (brax_python and Path(brax_python).exists()):
-                        rates[backend] = None
-                        continue
-                    python = brax_python
-                steps = str(MUJOCO_ENV_STEPS[backend])
-                args = [python, *cmd, "--backend", backend, "--envs", str(n), "--steps", steps]
-                row = _last_json(args, timeout=300)
-                rows["env"].append(row)
-                rates[backend] = row.get("env_steps_per_second")
-            rows["ratios"].append({"task": task, "envs": n, **_ratios(rates)})
-    if brax_python is None or not Path(brax_python).exists():
-        rows["generalized"] = "not measured: brax is not a dependency; give --brax-python"
-    if not quick:
-        drift = [sys.executable, str(here / "mujoco_drift.py"), "--task"]
-        rows["drift"] = [_last_json([*drift, task]) for task in envs.mujoco.TASKS]
-    for task, (algos, size, engines) in MUJOCO_TRAIN.items():
-        if quick:
-            if task != "inverted_pendulum":
-                continue
-            algos, size = ("ldn",), {"seeds": 1, "episodes": 8}
-        for backend in engines:
-            for algo in algos:
-                code = (
-                    f"import json, sys; sys.path.insert(0, {str(here)!r}); from bench import "
-                    f"training; print(json.dumps(training({algo!r}, env={task!r}, "
-                    f"chunk_iterations=1, backend={backend!r}, **{size!r})))"
-                )
-                rows["train"].append(_last_json([sys.executable, "-c", code]))
-    rows["train_ratios"] = _train_ratios(rows["train"])
-    return rows
-
-
-def _ratios(rates: dict) -> dict:
-    out = {}
-    if rates.get("native") and rates.get("mjx"):
-        out["native_over_mjx"] = round(rates["native"] / rates["mjx"], 1)
-    if rates.get("native") and rates.get("generalized"):
-        out["native_over_generalized"] = round(rates["native"] / rates["generalized"], 1)
-    if rates.get("native") and rates.get("rollout"):
-        out["rollout_over_native"] = round(rates["rollout"] / rates["native"], 2)
-    return out
-
-
-def _train_ratios(rows: list[dict]) -> list[dict]:
-    """Training env steps/s native over mjx, per (env, algo) trained on both."""
-    rate = {(r.get("env"), r.get("algo"), r.get("backend")): r.get("env_steps_per_s") for r in rows}
-    out = []
-    for (env, algo, backend), native in rate.items():
-        mjx = rate.get((env, algo, "mjx"))
-        if backend == "native" and native and mjx:
-            out.append({"env": env, "algo": algo, "native_over_mjx": round(native / mjx, 1)})
-    return out
-
-
-def _last_json(cmd: list[str], timeout: float = 600) -> dict:
-    """The last stdout line of `cmd` as JSON; a failure or a timeout is reported as a row."""
-    try:
-        done = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
-    except subprocess.TimeoutExpired:
-        return {"cmd": " ".join(cmd[1:]), "failed": f"timed out after {timeout:.0f} s"}
-    if done.returncode != 0:
-        return {"cmd": " ".join(cmd[1:]), "failed": done.stderr.strip().splitlines()[-1:]}
-    return json.loads(done.stdout.strip().splitlines()[-1])
 
 
 def _add_overheads(rows: list[dict]) -> None:

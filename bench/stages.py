@@ -27,6 +27,9 @@ from ldn_jax.train import Trainer
 
 Array = jax.Array
 
+ALGOS = ("a2c", "a2c-model", "ldn", "ppo", "ppo-model", "ppo-ldn")
+"""The six algorithms the bench trains (the CLI's names, less the alias a2c-ldn)."""
+
 
 def _best_seconds(fn, *args, repeats: int = 3) -> float:
     """Fastest of `repeats` calls after one warm-up call (the compile)."""

@@ -51,7 +51,7 @@ def test_ppo_update_times_one_rollout_of_the_paper_presets_ppo_against_its_gradi
 
 
 def test_seed_ratios_divide_each_algorithms_rate_by_its_rate_at_the_fewest_seeds():
-    import bench
+    import seeds
 
     rows = [
         {"algo": "ldn", "seeds": 100, "env_steps_per_s": 300},
@@ -61,6 +61,6 @@ def test_seed_ratios_divide_each_algorithms_rate_by_its_rate_at_the_fewest_seeds
     ]
     ratios = {
         (r["algo"], r["seeds"]): r["env_steps_per_s_over_fewest_seeds"]
-        for r in bench._seed_ratios(rows)
+        for r in seeds.seed_ratios(rows)
     }
     assert ratios == {("ldn", 100): 1.5, ("ldn", 10): 1.0, ("ppo", 10): 1.0, ("ppo", 1000): 0.5}
