@@ -30,14 +30,14 @@ format: $(STAMP)
 	$(VENV)/bin/ruff format .
 
 bench: $(STAMP)
-	$(PY) bench/bench.py $(BENCH_ARGS)
+	$(PY) -m bench.bench $(BENCH_ARGS)
 
 # The paper's results into experiments/results/ (REPORT.md there): CartPole, inverted_pendulum and a
 # short halfcheetah run on CPU; SCALE=paper for the larger budget and every MuJoCo task.
 # Training runs are kept in experiments/results/runs/ and reused.
 SCALE ?= cpu
 paper: $(STAMP)
-	$(PY) experiments/paper/all.py --scale $(SCALE)
+	$(PY) -m experiments.paper.all --scale $(SCALE)
 
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache

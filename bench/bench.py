@@ -25,19 +25,16 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 
+from bench import stages
+from bench.mujoco_section import mujoco_section
+from bench.seeds import SEED_COUNTS, seed_counts, seed_scaling
+from bench.stages import ALGOS
+from ldn_jax import envs
+from ldn_jax.config import from_preset
+from ldn_jax.host.runtime import compile_chunk, enable_compile_cache
+from ldn_jax.trainer import Trainer
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-import envs  # noqa: E402
-from experiments.runtime import compile_chunk, enable_compile_cache  # noqa: E402
-from ldn_jax.config import from_preset  # noqa: E402
-from ldn_jax.train import Trainer  # noqa: E402
-
-sys.path.insert(0, str(ROOT / "bench"))
-import stages  # noqa: E402
-from mujoco_section import mujoco_section  # noqa: E402
-from seeds import SEED_COUNTS, seed_counts, seed_scaling  # noqa: E402
-from stages import ALGOS  # noqa: E402
 
 SECTIONS = (
     "env",

@@ -13,5 +13,5 @@ mkdir -p "$out"
 python=${PYTHON:-python3}
 nvidia-smi >"$out/nvidia-smi.txt" 2>&1 || true
 "$python" -c "import jax; print(jax.__version__, jax.devices())"
-PYTHONUNBUFFERED=1 PYTHONPATH=. "$python" bench/bench.py --sections seeds \
+PYTHONUNBUFFERED=1 PYTHONPATH=. "$python" -m bench.bench --sections seeds \
     --out "$out/gpu_seeds.json"

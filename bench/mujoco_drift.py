@@ -1,6 +1,6 @@
 """How far the native and mjx engines drift apart from the same start, one JSON line per task.
 
-    python bench/mujoco_drift.py --task halfcheetah
+    python -m bench.mujoco_drift --task halfcheetah
 
 Both engines reset from the same key (the same float32 qpos / qvel) and take the same random
 actions for `--steps` steps on `--envs` envs. Reported: the largest absolute observation
@@ -14,16 +14,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
-from pathlib import Path
-
-import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import jax
+import numpy as np
 
-import envs
+from ldn_jax import envs
 
 
 def trajectory(task: str, backend: str, n_envs: int, steps: int) -> np.ndarray:

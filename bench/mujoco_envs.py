@@ -1,9 +1,9 @@
 """Env steps per second of a MuJoCo task on one physics path, printed as one JSON line.
 
-    python bench/mujoco_envs.py --task halfcheetah --backend native --envs 80
+    python -m bench.mujoco_envs --task halfcheetah --backend native --envs 80
 
 Backends:
-- `native`, `mjx`: our env (`envs.make(task)`), jit(vmap) of a `--steps` scan over `--envs`
+- `native`, `mjx`: our env (`ldn_jax.envs.make(task)`), jit(vmap) of a `--steps` scan over `--envs`
   envs with uniform random actions; every observation and reward is summed into the carry,
   so XLA cannot delete the physics. Compile seconds: first call minus the median of the rest.
 - `rollout`: `mujoco.rollout` called from numpy on the same model with the same pool as the
@@ -17,13 +17,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
 def _median(times: list[float]) -> float:
@@ -33,7 +29,7 @@ def _median(times: list[float]) -> float:
 def jax_rate(task: str, backend: str, n_envs: int, steps: int, repeats: int) -> dict:
     import jax
 
-    import envs
+    from ldn_jax import envs
 
     env, params = envs.make(task)
     params = params.replace(backend=backend)
@@ -67,7 +63,7 @@ def jax_rate(task: str, backend: str, n_envs: int, steps: int, repeats: int) -> 
 def rollout_rate(task: str, n_envs: int, steps: int, repeats: int) -> dict:
     import mujoco
 
-    from envs.mujoco import TASKS, model, native
+    from ldn_jax.envs.mujoco import TASKS, model, native
 
     t = TASKS[task]
     m = model.load(t.asset)
@@ -97,7 +93,7 @@ def rollout_rate(task: str, n_envs: int, steps: int, repeats: int) -> dict:
 def gymnasium_rate(task: str, steps: int, repeats: int) -> dict:
     import gymnasium
 
-    from envs.mujoco import TASKS, model
+    from ldn_jax.envs.mujoco import TASKS, model
 
     with model.settotalmass_ignored():
         env = gymnasium.make(TASKS[task].gymnasium_id).unwrapped  # no per-step checkers

@@ -9,9 +9,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from stages import ALGOS
-
-import envs
+from bench.stages import ALGOS
+from ldn_jax import envs
 
 MUJOCO_TRAIN = {
     "inverted_pendulum": (ALGOS, {"seeds": 10, "episodes": 80}, ("native",)),
@@ -76,8 +75,8 @@ def mujoco_section(quick: bool = False, brax_python: str | None = None) -> dict:
         for backend in engines:
             for algo in algos:
                 code = (
-                    f"import json, sys; sys.path.insert(0, {str(here)!r}); from bench import "
-                    f"training; print(json.dumps(training({algo!r}, env={task!r}, "
+                    f"import json; from bench.bench import training; "
+                    f"print(json.dumps(training({algo!r}, env={task!r}, "
                     f"chunk_iterations=1, backend={backend!r}, **{size!r})))"
                 )
                 rows["train"].append(last_json([sys.executable, "-c", code]))
@@ -110,7 +109,8 @@ def _train_ratios(rows: list[dict]) -> list[dict]:
 def last_json(cmd: list[str], timeout: float = 600) -> dict:
     """The last stdout line of `cmd` as JSON; a failure or a timeout is reported as a row."""
     try:
-        done = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+        root = Path(__file__).resolve().parents[1]  # `python -c` finds the bench package there
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=root)
     except subprocess.TimeoutExpired:
         return {"cmd": " ".join(cmd[1:]), "failed": f"timed out after {timeout:.0f} s"}
     if done.returncode != 0:

@@ -11,9 +11,9 @@ import time
 
 import jax
 
-from experiments.runtime import compile_chunk
 from ldn_jax.config import from_preset
-from ldn_jax.train import Trainer
+from ldn_jax.host.runtime import compile_chunk
+from ldn_jax.trainer import Trainer
 
 
 def seed_scaling(batches, episodes: int = 80) -> dict:

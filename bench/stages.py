@@ -18,12 +18,12 @@ import jax
 import jax.numpy as jnp
 import optax
 
-import envs
+from ldn_jax import envs
 from ldn_jax.config import AgentConfig, from_preset
 from ldn_jax.learners.a2c import n_step_targets
 from ldn_jax.networks import MLP
 from ldn_jax.prng import written_out
-from ldn_jax.train import Trainer
+from ldn_jax.trainer import Trainer
 
 Array = jax.Array
 

@@ -14,9 +14,8 @@ import types
 import typing
 from dataclasses import dataclass, field
 
-import envs
-from envs.mujoco import BACKEND_CHOICES
-from ldn_jax import networks
+from ldn_jax import envs, networks
+from ldn_jax.envs.mujoco import BACKEND_CHOICES
 
 ACTIVATIONS = tuple(networks.ACTIVATIONS)
 """Hidden activations the networks know (`ldn_jax.networks` owns them)."""
@@ -229,7 +228,7 @@ class Config:
     """One training run: an env, an algorithm, and every seed x K it runs in one program."""
 
     env: str = "cartpole-v2"
-    """Environment name (see `envs.names()`)."""
+    """Environment name (see `ldn_jax.envs.names()`)."""
     algo: str = "ldn"
     """Algorithm: one of `ALGORITHMS`."""
     preset: str = "paper"

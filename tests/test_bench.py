@@ -1,14 +1,9 @@
 """The bench's own arithmetic (its timings are `make bench`'s business, not the tests')."""
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-
-import stages
+from bench import stages
 
 
 def test_masked_share_counts_the_segments_the_longest_run_forces_on_every_run():
@@ -51,7 +46,7 @@ def test_ppo_update_times_one_rollout_of_the_paper_presets_ppo_against_its_gradi
 
 
 def test_seed_ratios_divide_each_algorithms_rate_by_its_rate_at_the_fewest_seeds():
-    import seeds
+    from bench import seeds
 
     rows = [
         {"algo": "ldn", "seeds": 100, "env_steps_per_s": 300},

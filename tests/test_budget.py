@@ -6,8 +6,8 @@ import json
 
 import pytest
 
-from experiments.training import train
 from ldn_jax.config import from_preset
+from ldn_jax.host.training import train
 
 STEPS = 3000
 

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from gymnasium.envs.classic_control.cartpole import CartPoleEnv
 
-import envs
-from envs.cartpole import THETA_THRESHOLD, X_THRESHOLD, EnvState
+from ldn_jax import envs
+from ldn_jax.envs.cartpole import THETA_THRESHOLD, X_THRESHOLD, EnvState
 
 
 def _states(rng: np.random.Generator, n: int) -> np.ndarray:

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from experiments.training import Stop
 from ldn_jax import load_policy
+from ldn_jax.host.training import Stop
 
 ROOT = Path(__file__).resolve().parents[1]
 RUN = [sys.executable, str(ROOT / "experiments" / "run.py")]
@@ -110,7 +110,7 @@ def test_ppo_ldn_run_logs_ppo_losses(tmp_path):
 
 
 def test_auto_backend_is_recorded_as_what_it_resolved_to():
-    from experiments import flags as run
+    from ldn_jax.host import flags as run
 
     config = run.build_config(run.parse_args(["--env", "hopper"]))
     assert config.backend == "native"  # a CPU machine
@@ -121,7 +121,7 @@ def test_auto_backend_is_recorded_as_what_it_resolved_to():
 
 
 def test_support_flag_sets_the_box_or_turns_it_off():
-    from experiments import flags as run
+    from ldn_jax.host import flags as run
 
     support = lambda *flags: run.build_config(run.parse_args(list(flags))).model.support
     assert support("--env", "hopper") == 0.1 and support() is None  # MuJoCo / CartPole
@@ -133,7 +133,7 @@ def test_a_model_mujoco_cannot_load_exits_2_with_one_line(tmp_path):
     (tmp_path / "hopper.xml").write_text("<mujoco><worldbody>")
     code = (
         "import sys\n"
-        "from envs.mujoco import model\n"
+        "from ldn_jax.envs.mujoco import model\n"
         f"model.asset_path = lambda asset: {str(tmp_path)!r} + '/' + asset\n"
         "from experiments import run\n"
         "sys.exit(run.main(['--env', 'hopper', '--backend', 'native', '--quiet']))\n"
@@ -147,7 +147,7 @@ def test_a_held_run_directory_is_refused_and_a_killed_holder_leaves_no_lock(run_
     import os
     import signal
 
-    from ldn_jax import run_dir as run_dirs
+    from ldn_jax.host import run_dir as run_dirs
 
     with run_dirs.hold(run_dir):
         result = _run("--resume", str(run_dir), timeout=60)
@@ -159,7 +159,7 @@ def test_a_held_run_directory_is_refused_and_a_killed_holder_leaves_no_lock(run_
     fresh = tmp_path / "fresh"
     fresh.mkdir()
     code = (
-        "import sys, time; from pathlib import Path; from ldn_jax import run_dir\n"
+        "import sys, time; from pathlib import Path; from ldn_jax.host import run_dir\n"
         f"with run_dir.hold(Path({str(fresh)!r})):\n"
         "    print('held', flush=True); time.sleep(60)\n"
     )
@@ -203,7 +203,7 @@ def test_a_grid_trains_each_run_as_alone_and_the_same_command_goes_on_after_a_st
     """`--env A,B`: one run per env in DIR/ENV-ALGO, each as its single run; stopped in its
     first run, the same command resumes it, starts the next, and then keeps both; with
     other settings it is refused."""
-    from experiments import run as command
+    from ldn_jax.host import run as command
     from tests.test_resume import StopAfter
 
     grid, alone = tmp_path / "grid", tmp_path / "alone"
@@ -244,7 +244,7 @@ def test_a_grid_trains_each_run_as_alone_and_the_same_command_goes_on_after_a_st
     ],
 )
 def test_bad_grids_exit_2_with_one_line_before_training(args, needle, tmp_path, capsys):
-    from experiments import run as command
+    from ldn_jax.host import run as command
 
     code = command.main([*args, "--out", str(tmp_path / "g"), "--compile-cache", "none"])
     err = capsys.readouterr().err

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from experiments import flags
-from experiments.settings import UsageError
 from ldn_jax.config import Config, fields, from_preset, get_field
+from ldn_jax.host import flags
+from ldn_jax.host.settings import UsageError
 
 ROOT = Path(__file__).resolve().parents[1]
 RUN = [sys.executable, str(ROOT / "experiments" / "run.py")]

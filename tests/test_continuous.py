@@ -153,10 +153,10 @@ def test_reward_scale_multiplies_the_training_reward_after_the_terminal_one():
 
 
 def test_a_saved_policy_standardises_observations_with_its_own_statistics(tmp_path):
-    from experiments.training import train
     from ldn_jax import load_policy
-    from ldn_jax.run_dir import RunDir
-    from ldn_jax.train import Trainer
+    from ldn_jax.host.run_dir import RunDir
+    from ldn_jax.host.training import train
+    from ldn_jax.trainer import Trainer
 
     config = from_preset(
         "paper", env="cartpole-v1", algo="ppo", seeds=1, episodes=8, workers=4,
@@ -219,8 +219,8 @@ def test_continuous_defaults_normalise_the_model():
 
 @pytest.mark.mujoco
 def test_ldn_trains_on_inverted_pendulum_end_to_end(tmp_path):
-    from experiments.training import train
     from ldn_jax import load_policy
+    from ldn_jax.host.training import train
 
     config = from_preset(
         "paper", env="inverted_pendulum", algo="ldn", seeds=1, episodes=4, workers=2

@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-import envs
+from ldn_jax import envs
 from ldn_jax.buffer import Transitions, buffer_add, buffer_init
 from ldn_jax.config import ModelConfig
 from ldn_jax.dynamics import Dynamics

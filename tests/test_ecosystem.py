@@ -16,10 +16,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-import envs
-from envs.cartpole import EnvState
-from experiments import gym_eval
-from ldn_jax import load_policy
+from ldn_jax import envs, load_policy
+from ldn_jax.envs.cartpole import EnvState
+from ldn_jax.host import gym_eval
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = ["--seeds", "1", "--workers", "4", "--chunk", "2", "--quiet"]
@@ -34,13 +33,13 @@ def entry_point():
 
 def ldn_jax(*args, cwd: Path, timeout=300):
     """Run `ldn-jax ARGS` in a new process: the installed console script of this interpreter's
-    environment, or `python -m experiments.cli` where the editable install predates it."""
+    environment, or `python -m ldn_jax.host.cli` where the editable install predates it."""
     script = shutil.which("ldn-jax", path=str(Path(sys.executable).parent))
     env = dict(os.environ)
     if script:
         command = [script]
     else:
-        command = [sys.executable, "-m", "experiments.cli"]
+        command = [sys.executable, "-m", "ldn_jax.host.cli"]
         env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), env.get("PYTHONPATH")]))
     return subprocess.run(
         [*command, *args], capture_output=True, text=True, timeout=timeout, cwd=cwd, env=env
@@ -227,7 +226,7 @@ def test_bad_input_from_the_shell_has_no_traceback(tmp_path):
 
 
 def test_compare_prints_iqm_and_the_probability_of_improvement(ldn_run, a2c_run, tmp_path):
-    from experiments import stats
+    from ldn_jax.host import stats
 
     out = tmp_path / "compare.json"
     result = ldn_jax("compare", str(ldn_run), str(a2c_run), "--json", str(out), cwd=tmp_path)

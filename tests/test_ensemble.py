@@ -11,11 +11,14 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from experiments.training import train
-from ldn_jax import checkpoint, load_policy
+from ldn_jax import load_policy
 from ldn_jax.buffer import buffer_add, buffer_init
 from ldn_jax.config import AgentConfig, Config, ModelConfig, from_preset, validate
 from ldn_jax.dynamics import Dynamics, ModelState
+from ldn_jax.host import checkpoint
+from ldn_jax.host.run_dir import FINAL as FINAL_CHECKPOINT
+from ldn_jax.host.run_dir import read_config as read_run_config
+from ldn_jax.host.training import train
 from ldn_jax.imagination import model_world, stop_rule
 from ldn_jax.learners.a2c import A2C
 from ldn_jax.learning_degree import (
@@ -27,9 +30,7 @@ from ldn_jax.learning_degree import (
     relative_disagreement,
 )
 from ldn_jax.rollout import play_episodes
-from ldn_jax.run_dir import FINAL as FINAL_CHECKPOINT
-from ldn_jax.run_dir import read_config as read_run_config
-from ldn_jax.train import Trainer
+from ldn_jax.trainer import Trainer
 from tests.test_core import _cartpole_transitions
 
 ROOT = Path(__file__).resolve().parents[1]

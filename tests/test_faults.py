@@ -12,12 +12,12 @@ from pathlib import Path
 
 import pytest
 
-from experiments import run as command
-from experiments import training
-from experiments.training import train
-from ldn_jax import run_dir as run_dirs
 from ldn_jax.config import from_preset
-from ldn_jax.run_dir import RunDir
+from ldn_jax.host import run as command
+from ldn_jax.host import run_dir as run_dirs
+from ldn_jax.host import training
+from ldn_jax.host.run_dir import RunDir
+from ldn_jax.host.training import train
 
 ROOT = Path(__file__).resolve().parents[1]
 RUN = [sys.executable, str(ROOT / "experiments" / "run.py")]

@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from experiments.gym_eval import episode_returns, make_env
-from experiments.training import train
 from ldn_jax import load_policy
 from ldn_jax.config import from_preset
-from ldn_jax.run_dir import RunDir
+from ldn_jax.host.gym_eval import episode_returns, make_env
+from ldn_jax.host.run_dir import RunDir
+from ldn_jax.host.training import train
 
 # Measured on 2 CPU cores (2026-11-22), seeds 0-3, paper preset: a2c reached 150 in
 # 688-1112 episodes and ldn in 839-1003; ppo in 174-253 and ppo-ldn in 240-573. The budgets

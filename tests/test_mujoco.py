@@ -17,8 +17,8 @@ import mujoco
 import numpy as np
 import pytest
 
-import envs
-from envs.mujoco import TASKS, EnvState, control, model, native
+from ldn_jax import envs
+from ldn_jax.envs.mujoco import TASKS, EnvState, control, model, native
 
 pytestmark = pytest.mark.mujoco
 
@@ -60,7 +60,7 @@ def _parity(task: str) -> dict:
     """gymnasium's env and ours from gymnasium's reset state, the same 200 actions.
 
     gymnasium's solver warm start is cleared before each step: `mujoco.rollout` starts each
-    env step cold (see envs/mujoco/native.py), and halfcheetah and ant turn any difference
+    env step cold (see ldn_jax/envs/mujoco/native.py), and halfcheetah and ant turn any difference
     of 1e-13 into O(1) within 200 steps. Both envs step past termination (gymnasium's
     unwrapped env does not stop), and both truncate at 200 steps."""
     t = TASKS[task]
@@ -337,9 +337,9 @@ def test_a_non_finite_action_is_zero_control_without_mujoco_warnings(tmp_path, m
 def test_native_run_resumes_to_the_bit(tmp_path):
     """ldn on inverted_pendulum through the native engine, interrupted after 2 of 4 chunks and
     resumed: every metrics line and the final history equal the uninterrupted run's."""
-    from experiments.training import Interrupted, train
     from ldn_jax.config import from_preset
-    from ldn_jax.run_dir import read_config as read_run_config
+    from ldn_jax.host.run_dir import read_config as read_run_config
+    from ldn_jax.host.training import Interrupted, train
     from tests.test_resume import StopAfter, _lines
 
     config = from_preset(

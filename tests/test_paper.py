@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 from experiments.paper import figure5, report
-from ldn_jax import calibration as cal
+from experiments.paper import shadow as cal
 from ldn_jax.config import from_preset
 from ldn_jax.learning_degree import ld_histogram
-from ldn_jax.train import Trainer
+from ldn_jax.trainer import Trainer
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -126,9 +126,14 @@ def smoke(tmp_path_factory):
     """
     results = tmp_path_factory.mktemp("results")
     env = {**os.environ, "JAX_DISABLE_MOST_OPTIMIZATIONS": "1"}
-    command = [sys.executable, str(ROOT / "experiments/paper/all.py"), "--smoke"]
+    command = [sys.executable, "-m", "experiments.paper.all", "--smoke"]
     done = subprocess.run(
-        [*command, "--results", str(results)], capture_output=True, text=True, timeout=600, env=env
+        [*command, "--results", str(results)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env=env,
+        cwd=ROOT,
     )
     assert done.returncode == 0, done.stderr[-3000:]
     return results, done.stdout

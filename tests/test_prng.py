@@ -10,7 +10,7 @@ from jax._src.random import threefry2x32 as threefry
 
 from ldn_jax import prng
 from ldn_jax.config import from_preset
-from ldn_jax.train import Trainer
+from ldn_jax.trainer import Trainer
 
 pytestmark = pytest.mark.skipif(
     not prng.INSTALLED or jax.default_backend() != "cpu", reason="CPU-only lowering"

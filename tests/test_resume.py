@@ -12,10 +12,10 @@ import jax
 import numpy as np
 import pytest
 
-from experiments.training import Interrupted, Stop, train
 from ldn_jax.config import from_preset
-from ldn_jax.run_dir import read_config as read_run_config
-from ldn_jax.train import Trainer
+from ldn_jax.host.run_dir import read_config as read_run_config
+from ldn_jax.host.training import Interrupted, Stop, train
+from ldn_jax.trainer import Trainer
 
 ROOT = Path(__file__).resolve().parents[1]
 RUN = [sys.executable, str(ROOT / "experiments" / "run.py")]

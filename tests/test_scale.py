@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from experiments.training import train
 from ldn_jax import load_policy
 from ldn_jax.config import from_preset
+from ldn_jax.host.training import train
 
 ROOT = Path(__file__).resolve().parents[1]
 RUN = [sys.executable, str(ROOT / "experiments" / "run.py")]

@@ -13,13 +13,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from experiments.training import Interrupted, train
-from ldn_jax import checkpoint
 from ldn_jax.config import from_preset, validate
-from ldn_jax.metrics import run_crossing, threshold_crossing
+from ldn_jax.host import checkpoint
+from ldn_jax.host.metrics import run_crossing, threshold_crossing
+from ldn_jax.host.run_dir import read_config as read_run_config
+from ldn_jax.host.training import Interrupted, train
 from ldn_jax.rollout import play_episodes
-from ldn_jax.run_dir import read_config as read_run_config
-from ldn_jax.train import Trainer
+from ldn_jax.trainer import Trainer
 from tests.test_resume import StopAfter, _lines
 from tests.test_scale import _run
 

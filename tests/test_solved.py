@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from experiments.training import Interrupted, train
 from ldn_jax.config import from_preset
-from ldn_jax.run_dir import read_config as read_run_config
+from ldn_jax.host.run_dir import read_config as read_run_config
+from ldn_jax.host.training import Interrupted, train
 from tests.test_resume import StopAfter
 
 T, W = 20, 4

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.stats import mannwhitneyu
 
-from experiments import stats
+from ldn_jax.host import stats
 
 
 def test_iqm_is_the_mean_of_the_middle_half():

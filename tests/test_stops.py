@@ -7,10 +7,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from experiments import flags
-from experiments.settings import UsageError
 from ldn_jax.config import AgentConfig, ModelConfig, from_preset, validate
 from ldn_jax.dynamics import Dynamics
+from ldn_jax.host import flags
+from ldn_jax.host.settings import UsageError
 from ldn_jax.imagination import (
     imagined_steps_limit,
     m2ac_kept,
@@ -20,7 +20,7 @@ from ldn_jax.imagination import (
 )
 from ldn_jax.learners.a2c import A2C
 from ldn_jax.rollout import play_episodes
-from ldn_jax.train import Trainer
+from ldn_jax.trainer import Trainer
 
 NEVER = lambda obs: jnp.zeros(obs.shape[:-1], bool)
 ENCODE = lambda a: jax.nn.one_hot(a, 2)

@@ -12,13 +12,13 @@ import jax
 import numpy as np
 import pytest
 
-from experiments import flags
-from experiments.settings import UsageError
-from experiments.training import Interrupted, train
 from ldn_jax import load_policy
 from ldn_jax.config import from_preset, get_field, sweepable, validate
-from ldn_jax.run_dir import read_config as read_run_config
-from ldn_jax.train import Trainer
+from ldn_jax.host import flags
+from ldn_jax.host.run_dir import read_config as read_run_config
+from ldn_jax.host.settings import UsageError
+from ldn_jax.host.training import Interrupted, train
+from ldn_jax.trainer import Trainer
 from tests.test_resume import StopAfter, _lines, _timeless
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -156,7 +156,7 @@ def test_a_sweep_run_names_its_points_in_every_file(sweep_run):
         load_policy(out, at={"agent.gamma": 0.9})
     with pytest.raises(ValueError, match=r"agent.actor_lr=0.5 not in this run"):
         load_policy(out, at={"agent.actor_lr": 0.5})
-    from experiments.compare import render, rows
+    from ldn_jax.host.compare import render, rows
 
     table = rows([out])
     assert [r["point"] for r in table] == [

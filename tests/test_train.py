@@ -11,7 +11,7 @@ from ldn_jax.dynamics import MIN_WIDTH, Dynamics
 from ldn_jax.imagination import model_world, stop_rule
 from ldn_jax.learners.a2c import A2C
 from ldn_jax.rollout import play_episodes
-from ldn_jax.train import Trainer
+from ldn_jax.trainer import Trainer
 
 
 def _scripted_world(end_at, terminal):

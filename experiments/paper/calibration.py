@@ -1,11 +1,11 @@
 """LD calibration: does the learning degree know when the model is wrong?
 
-    python experiments/paper/calibration.py [--scale cpu|paper] [--smoke] [--results DIR]
+    python -m experiments.paper.calibration [--scale cpu|paper] [--smoke] [--results DIR]
 
 MBRL-LDN on cartpole-v2 (the Table 2 run's config and seeds, K = 1) is analysed after a few
 numbers of real episodes (cpu: 200, 800, 2000): the earlier points by retraining that config
 in-process and stopping there, the last from the Table 2 run's final checkpoint. At each point,
-per seed, `ldn_jax.calibration.shadow_rollouts` plays imagined episodes in M1 with the real
+per seed, `experiments.paper.shadow.shadow_rollouts` plays imagined episodes in M1 with the real
 env alongside, and `fit_ensemble` fits E extra models on the real buffer for the
 ensemble-disagreement learning degree. Reported: Pearson and Spearman correlation of LD (and of
 sigma2 and the disagreement) with the true one-step and compounding errors, the ROC AUC of each
@@ -22,15 +22,13 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
-
 import jax
 import matplotlib.pyplot as plt
 import numpy as np
 
 from experiments.paper import common
-from ldn_jax import calibration as cal
-from ldn_jax.train import Trainer
+from experiments.paper import shadow as cal
+from ldn_jax.trainer import Trainer
 
 ALGO = "ldn"
 

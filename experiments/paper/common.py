@@ -16,22 +16,19 @@ import math
 import os
 import platform
 import shutil
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[2]
-if str(ROOT) not in sys.path:  # run as `python experiments/paper/NAME.py`
-    sys.path.insert(0, str(ROOT))
+from ldn_jax import envs
+from ldn_jax.config import Config, from_preset, validate
+from ldn_jax.host import stats
+from ldn_jax.host.run_dir import RunDir
+from ldn_jax.host.training import train
 
-import envs  # noqa: E402
-from experiments import stats  # noqa: E402
-from experiments.training import train  # noqa: E402
-from ldn_jax.config import Config, from_preset, validate  # noqa: E402
-from ldn_jax.run_dir import RunDir  # noqa: E402
+ROOT = Path(__file__).resolve().parents[2]
 
 RESULTS = ROOT / "experiments" / "results"
 
@@ -363,7 +360,7 @@ def mujoco_curves(
     run finished."""
     import matplotlib.pyplot as plt
 
-    from experiments.plots import band_panel
+    from ldn_jax.host.plots import band_panel
 
     done: dict[str, list[dict]] = {}
     for entry in entries:
@@ -391,7 +388,7 @@ def mujoco_curves(
 
 def describe(values: list[float | None]) -> dict:
     """min, max, mean, s.d. (ddof 1), and the IQM with its bootstrap 95% interval
-    (`experiments.stats`), over the runs that have a value; `reached` counts them."""
+    (`ldn_jax.host.stats`), over the runs that have a value; `reached` counts them."""
     have = np.array([v for v in values if v is not None], float)
     out = {"reached": int(have.size), "runs": len(values)}
     if have.size == 0:

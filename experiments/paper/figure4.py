@@ -1,7 +1,7 @@
 """Figure 4: learning curves on CartPole v0/v1/v2 (moving return vs real episodes, mean and
 95% band over seeds), A2C vs A2C-Model vs MBRL-LDN, from the Table 2 runs.
 
-    python experiments/paper/figure4.py [--scale cpu|paper] [--smoke] [--results DIR]
+    python -m experiments.paper.figure4 [--scale cpu|paper] [--smoke] [--results DIR]
 
 Writes figure4.png and figure4.csv (per env, algo and logged point: episodes, mean, band)
 into DIR/figure4/.
@@ -12,14 +12,12 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
-
 import matplotlib.pyplot as plt
 import numpy as np
 
 from experiments.paper import common, table2
-from experiments.plots import band_panel
-from ldn_jax.metrics import mean_band
+from ldn_jax.host.metrics import mean_band
+from ldn_jax.host.plots import band_panel
 
 MAX_POINTS = 200
 """Points per curve in figure4.csv (evenly thinned; the figure uses every iteration)."""

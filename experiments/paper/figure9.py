@@ -2,7 +2,7 @@
 per env (every K shares the seeds' initialisations): cartpole-v2, and the six MuJoCo tasks
 (the CPU scale at short budgets).
 
-    python experiments/paper/figure9.py [--scale cpu|paper] [--smoke] [--results DIR]
+    python -m experiments.paper.figure9 [--scale cpu|paper] [--smoke] [--results DIR]
 
 Writes figure9.json, figure9.csv and figure9.png (per env: learning curves per K, and episodes
 to threshold per K, or the final moving return where the env has no threshold) into
@@ -14,13 +14,11 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
-
 import matplotlib.pyplot as plt
 import numpy as np
 
 from experiments.paper import common
-from experiments.plots import band_panel
+from ldn_jax.host.plots import band_panel
 
 K_VALUES = (0.5, 1.0, 2.0)
 LISTS = ("k", "final_moving_return", "episodes_to_threshold", "final_moving_returns")

@@ -1,7 +1,7 @@
 """REPORT.md from the result files: every table beside the paper's numbers, what reproduced
 and what did not, the machine and the commands.
 
-    python experiments/paper/report.py [--scale cpu|paper] [--smoke] [--results DIR]
+    python -m experiments.paper.report [--scale cpu|paper] [--smoke] [--results DIR]
 
 Reads DIR/<result>/*.json (a result not produced yet is reported as missing) and writes
 DIR/REPORT.md. It trains nothing.
@@ -12,8 +12,6 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from experiments.paper import common, report_mujoco, report_paper, report_studies
 from experiments.paper.report_format import TITLES, Bullets, Section, render_section
@@ -46,7 +44,7 @@ def setup(data: dict, scale: common.Scale) -> Section:
     flag = "--smoke" if scale.name == "smoke" else f"--scale {scale.name}"
     run = "make paper" + ("" if scale.name == "cpu" else f" SCALE={scale.name}")
     if scale.name == "smoke":
-        run = "python experiments/paper/all.py --smoke"
+        run = "python -m experiments.paper.all --smoke"
     budgets = {
         env: ", ".join(f"{n:,} {unit}" for unit, n in b.items())
         for env, b in scale.mujoco_budgets.items()
@@ -70,7 +68,7 @@ def setup(data: dict, scale: common.Scale) -> Section:
         "*reached*.",
         "Statistics (Agarwal et al., NeurIPS 2021): *IQM* is the interquartile mean over seeds "
         "(the mean of the middle half), with a bootstrap 95% interval (2,000 resamples, "
-        "percentile; `experiments/stats.py`, scipy); *P(better)* is the probability that a "
+        "percentile; `ldn_jax/host/stats.py`, scipy); *P(better)* is the probability that a "
         "seed of the first algorithm does better than a seed of the second (fewer episodes, or "
         "a higher return), with its bootstrap interval; 0.5 is a tie. The paper's own columns "
         "(mean ± s.d.) are kept beside them. `ldn-jax compare RUN_DIR ...` prints the same for "
@@ -80,7 +78,7 @@ def setup(data: dict, scale: common.Scale) -> Section:
         f"{machine['jax_backend']}; jax {machine['jax']}, jaxlib {machine['jaxlib']}, Python "
         f"{machine['python']}; results dated {dated(data) or machine['date']}. The CPU was "
         "shared with other jobs, so seconds are indicative.",
-        f"Commands: `{run}` (that is, `python experiments/paper/all.py {flag}`), "
+        f"Commands: `{run}` (that is, `python -m experiments.paper.all {flag}`), "
         "or one script at a time: "
         + ", ".join(f"`python experiments/paper/{n}.py {flag}`" for n in scripts)
         + ", then `table4.py`, `table5.py` and `report.py` the same way. `--scale paper` "

@@ -8,8 +8,8 @@ from dataclasses import dataclass, field
 
 from scipy import stats
 
-from experiments import stats as iqm_stats
 from experiments.paper import common
+from ldn_jax.host import stats as iqm_stats
 
 
 def fmt(value, digits: int = 1) -> str:

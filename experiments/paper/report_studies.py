@@ -3,7 +3,6 @@ the model's true error, the readings of eq. 3, and the stopping rules side by si
 
 from __future__ import annotations
 
-from experiments import stats as iqm_stats
 from experiments.paper.report_format import (
     TITLES,
     Section,
@@ -14,6 +13,7 @@ from experiments.paper.report_format import (
     mann_whitney,
     pm,
 )
+from ldn_jax.host import stats as iqm_stats
 
 
 def calibration_section(data: dict) -> Section:
@@ -21,7 +21,7 @@ def calibration_section(data: dict) -> Section:
         f"MBRL-LDN on {data['env']}, K = 1, {data['seeds']} seeds, "
         f"{data['imagined_episodes_per_seed']} imagined episodes per seed at each point, played "
         "in M1 with the sampled policy from fresh initial states while the real JAX CartPole is "
-        "stepped alongside (`ldn_jax/calibration.py`). Errors: " + data["errors"] + ". Steps: "
+        "stepped alongside (`experiments/paper/shadow.py`). Errors: " + data["errors"] + ". Steps: "
         "every imagined step before predicted termination (the LD stop not applied; the "
         "compounding error only while the real shadow episode runs). Expected "
         + data["expected"]

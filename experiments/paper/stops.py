@@ -1,7 +1,7 @@
 """The learning degree examined: the readings of eq. 3, and the stopping rules of imagination
 side by side (ours; the paper has neither study).
 
-    python experiments/paper/stops.py [--scale cpu|paper] [--smoke] [--results DIR]
+    python -m experiments.paper.stops [--scale cpu|paper] [--smoke] [--results DIR]
         [--study readings|rules] [--envs ENV,...]
 
 `--study` runs one of the two studies (default: both); `--envs` runs the rules study on
@@ -21,7 +21,7 @@ literal and the Figure 5 reading, and the ensemble estimator), the M2AC-style ma
 oracle (each one vmapped program over its parameter), fixed horizons h in {1, 5, 25}, and
 none (A3C-Model). Per rule: episodes (CartPole) or env steps (MuJoCo) to threshold, final
 moving return, imagined steps per real step and training seconds, each as an IQM with a
-bootstrap 95% interval (`experiments.stats`), and a verdict against A3C-Model.
+bootstrap 95% interval (`ldn_jax.host.stats`), and a verdict against A3C-Model.
 
 Writes DIR/stops/stops.json, stops.csv, readings.png and rules.png; REPORT.md's sections
 "The readings of eq. 3" and "Stopping rules" are made from them (`report.py`).
@@ -35,16 +35,14 @@ import json
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
-
 import matplotlib.pyplot as plt
 import numpy as np
 from scipy import stats as scipy_stats
 
-from experiments import stats
 from experiments.paper import common, figure5
 from ldn_jax.config import Config, validate
-from ldn_jax.metrics import run_crossing
+from ldn_jax.host import stats
+from ldn_jax.host.metrics import run_crossing
 
 READINGS = {
     "literal": ("ldn", {}, "mean over outputs, B = 1 (`paper`)", "mean (paper)"),

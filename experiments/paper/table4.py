@@ -1,6 +1,6 @@
 """Table 4: total moving reward on six MuJoCo tasks, A2C-Model vs MBRL-LDN.
 
-    python experiments/paper/table4.py [--scale cpu|paper] [--smoke] [--results DIR]
+    python -m experiments.paper.table4 [--scale cpu|paper] [--smoke] [--results DIR]
 
 "Total moving reward" is read as the final moving return (the paper's numbers exceed what
 some tasks can score in 1,000 steps, so compare the two algorithms, not the values). Both
@@ -12,9 +12,6 @@ table4.png (learning curves per task) into DIR/table4/.
 from __future__ import annotations
 
 import sys
-from pathlib import Path
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from experiments.paper import common
 

@@ -1,7 +1,7 @@
 """Table 5: PPO2 vs PPO2-Model vs PPO2-LDN on InvertedPendulum, HalfCheetah and Hopper:
 episodes to reach the top.
 
-    python experiments/paper/table5.py [--scale cpu|paper] [--smoke] [--results DIR]
+    python -m experiments.paper.table5 [--scale cpu|paper] [--smoke] [--results DIR]
 
 The paper does not define "the top". Ours, per task: 90% of the highest moving return any
 run of the three algorithms reached (`TOP_FRACTION`); a run's episodes to the top count real
@@ -13,14 +13,11 @@ table5.json, table5.csv and table5.png into DIR/table5/.
 from __future__ import annotations
 
 import sys
-from pathlib import Path
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 import numpy as np
 
 from experiments.paper import common
-from ldn_jax.metrics import run_crossing
+from ldn_jax.host.metrics import run_crossing
 
 ENVS = ("inverted_pendulum", "halfcheetah", "hopper")
 ALGOS = ("ppo", "ppo-model", "ppo-ldn")

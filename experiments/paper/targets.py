@@ -1,7 +1,7 @@
 """The MuJoCo targets at the default budgets: every algorithm on inverted_pendulum, the user's
 halfcheetah command, and PPO on halfcheetah.
 
-    python experiments/paper/targets.py [--scale cpu|paper] [--smoke] [--results DIR]
+    python -m experiments.paper.targets [--scale cpu|paper] [--smoke] [--results DIR]
 
 Not a table of the paper: what a user gets from the defaults (`DEFAULT_STEPS`), checked
 against the targets the project set itself.
@@ -19,13 +19,11 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
-
 import numpy as np
 
 from experiments.paper import common
 from ldn_jax.config import from_preset, validate
-from ldn_jax.metrics import run_crossing
+from ldn_jax.host.metrics import run_crossing
 
 PENDULUM_ALGOS = ("a2c", "a2c-model", "ldn", "ppo", "ppo-model", "ppo-ldn")
 PENDULUM_LEVEL = 900.0
@@ -123,7 +121,7 @@ def curves(entries: list[dict], path: Path) -> None:
     import matplotlib.pyplot as plt
     from matplotlib.ticker import FuncFormatter
 
-    from experiments.plots import band_panel
+    from ldn_jax.host.plots import band_panel
 
     done = [e for e in entries if e["status"] == "done"]
     if not done:

@@ -10,10 +10,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from experiments import stats
 from ldn_jax.config import Config
-from ldn_jax.metrics import mean_band
-from ldn_jax.run_dir import RunDir
+from ldn_jax.host import stats
+from ldn_jax.host.metrics import mean_band
+from ldn_jax.host.run_dir import RunDir
 
 
 def band_panel(

@@ -8,13 +8,13 @@ import sys
 
 import numpy as np
 
-from experiments import stats
-from experiments.plots import learning_curves
 from ldn_jax import sharding
 from ldn_jax.config import Config
-from ldn_jax.metrics import completed_returns, run_crossing
-from ldn_jax.run_dir import RunDir
-from ldn_jax.train import failure_names
+from ldn_jax.host import stats
+from ldn_jax.host.metrics import completed_returns, run_crossing
+from ldn_jax.host.plots import learning_curves
+from ldn_jax.host.run_dir import RunDir
+from ldn_jax.trainer import failure_names
 
 LOSS_SUFFIXES = ("_loss", "_entropy", "_approx_kl", "_clip_fraction")
 """Metrics written under "losses" in metrics.jsonl."""
@@ -185,7 +185,7 @@ STATISTICS = (
 def statistics(config: Config, runs: list[dict]) -> list[dict]:
     """Per point (K, and a sweep's values), each of `STATISTICS` over the seeds: the
     interquartile mean with its bootstrap 95% interval, beside mean and s.d.
-    (`experiments.stats.estimate`). To-threshold counts are over the runs that reached it
+    (`ldn_jax.host.stats.estimate`). To-threshold counts are over the runs that reached it
     (`reached` of `runs`)."""
     out = []
     for index in range(len(config.points)):

@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 import orbax.checkpoint as ocp
 
-from ldn_jax.train import TrainState
+from ldn_jax.trainer import TrainState
 
 
 def _raw(state: TrainState) -> TrainState:

@@ -19,7 +19,7 @@ import jax.numpy as jnp
 from flax import struct
 from jax.sharding import Mesh
 
-import envs
+from ldn_jax import envs
 from ldn_jax.buffer import Buffer, Transitions, buffer_add, buffer_init
 from ldn_jax.config import Config, with_values
 from ldn_jax.dynamics import Dynamics, ModelState, action_encoder

@@ -33,8 +33,8 @@ import mujoco
 import numpy as np
 from mujoco import rollout as mj_rollout
 
-from envs.mujoco import model as models
-from envs.mujoco.tasks import Physics, Task
+from ldn_jax.envs.mujoco import model as models
+from ldn_jax.envs.mujoco.tasks import Physics, Task
 
 Array = jax.Array
 

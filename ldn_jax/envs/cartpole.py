@@ -82,7 +82,7 @@ def dynamics(physics: Array, force: Array) -> Array:
 
 
 class CartPole:
-    """The CartPole family behind the `envs.base.Env` protocol."""
+    """The CartPole family behind the `ldn_jax.envs.base.Env` protocol."""
 
     def reset(self, key: Array, params: EnvParams) -> tuple[Array, EnvState]:
         physics = jax.random.uniform(key, (4,), jnp.float32, -RESET_BOUND, RESET_BOUND)

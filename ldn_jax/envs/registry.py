@@ -5,8 +5,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from envs import mujoco
-from envs.cartpole import CartPole, EnvParams
+from ldn_jax.envs import mujoco
+from ldn_jax.envs.cartpole import CartPole, EnvParams
 
 _CARTPOLE = {
     "cartpole-v0": EnvParams(max_steps=200, forces=(-10.0, 10.0)),

@@ -16,13 +16,13 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from experiments import summaries
-from experiments.loggers import Logger, NullLogger
-from experiments.runtime import compile_chunk
 from ldn_jax import sharding
 from ldn_jax.config import Config
-from ldn_jax.run_dir import FINAL, RunDir
-from ldn_jax.train import Trainer
+from ldn_jax.host import summaries
+from ldn_jax.host.loggers import Logger, NullLogger
+from ldn_jax.host.run_dir import FINAL, RunDir
+from ldn_jax.host.runtime import compile_chunk
+from ldn_jax.trainer import Trainer
 
 
 class Interrupted(Exception):
@@ -83,7 +83,7 @@ def train(config: Config, out: Path, options: TrainOptions | None = None, **fiel
 
     `fields` set `TrainOptions` fields directly. Across hosts only process 0 writes files.
     Raises `Interrupted` after checkpointing when `options.stop` asks for it between chunks,
-    `ldn_jax.run_dir.RunDirError` (one line) for a run directory it cannot use or write.
+    `ldn_jax.host.run_dir.RunDirError` (one line) for a run directory it cannot use or write.
     """
     if options is not None and not isinstance(options, TrainOptions):
         raise TypeError(f"options must be TrainOptions, got {options!r} (or pass fields by name)")

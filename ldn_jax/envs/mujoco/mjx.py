@@ -13,8 +13,8 @@ import io
 import jax
 import jax.numpy as jnp
 
-from envs.mujoco import model as models
-from envs.mujoco.tasks import Physics, Task
+from ldn_jax.envs.mujoco import model as models
+from ldn_jax.envs.mujoco.tasks import Physics, Task
 
 Array = jax.Array
 

@@ -25,6 +25,7 @@ from flax import struct
 from scipy import stats
 
 from ldn_jax.config import Config
+from ldn_jax.host.run_dir import RunDir
 from ldn_jax.learning_degree import (
     deviation,
     disagreement,
@@ -34,8 +35,7 @@ from ldn_jax.learning_degree import (
     stop_draw,
     stop_probability,
 )
-from ldn_jax.run_dir import RunDir
-from ldn_jax.train import Trainer, TrainState
+from ldn_jax.trainer import Trainer, TrainState
 
 Array = jax.Array
 
@@ -92,7 +92,7 @@ def shadow_rollouts(
     trained with `--ld ensemble`).
     """
     env, params = trainer.env, trainer.env_params
-    if not hasattr(env, "from_observation"):  # `envs.base`: the optional method
+    if not hasattr(env, "from_observation"):  # `ldn_jax.envs.base`: the optional method
         raise ValueError(f"shadow rollouts need an env whose observation is its state, not {env}")
     if trainer.dynamics is None:
         raise ValueError("shadow rollouts need a model-based run (a2c-model, ldn, ...)")

@@ -11,10 +11,10 @@ from pathlib import Path
 
 import jax
 
-from experiments.settings import UsageError
 from ldn_jax import sharding
 from ldn_jax.config import Config
-from ldn_jax.train import Trainer
+from ldn_jax.host.settings import UsageError
+from ldn_jax.trainer import Trainer
 
 
 def default_compile_cache() -> Path:

@@ -8,7 +8,7 @@ table read off the dataclasses' annotations, so a new field is settable the day 
 added): from a file (`--config FILE`, TOML or JSON, nested as config.json is), then the
 named flags (`CONFIG_FLAGS`: short names for the fields users set most), then
 `--set FIELD=VALUE`, each over the one before (their text is read into values by
-`experiments.settings`).
+`ldn_jax.host.settings`).
 
     python experiments/run.py --config runs/X/config.json --set agent.actor_lr=3e-4
 """
@@ -19,14 +19,7 @@ import argparse
 import dataclasses
 from pathlib import Path
 
-import envs
-from experiments.loggers import LOGGERS
-from experiments.settings import (
-    UsageError,
-    parse_sweep,
-    parse_value,
-    read_config_file,
-)
+from ldn_jax import envs
 from ldn_jax.config import (
     ACTION_ENCODINGS,
     ALGORITHMS,
@@ -39,6 +32,13 @@ from ldn_jax.config import (
     from_preset,
     get_field,
     validate,
+)
+from ldn_jax.host.loggers import LOGGERS
+from ldn_jax.host.settings import (
+    UsageError,
+    parse_sweep,
+    parse_value,
+    read_config_file,
 )
 
 

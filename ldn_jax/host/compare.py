@@ -12,8 +12,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from experiments import stats
-from ldn_jax.run_dir import RunDir, RunDirError
+from ldn_jax.host import stats
+from ldn_jax.host.run_dir import RunDir, RunDirError
 
 METRICS = {
     "episodes_to_threshold": ("episodes to threshold", True),

@@ -18,7 +18,7 @@ from urllib.parse import urlparse
 import numpy as np
 
 from ldn_jax.config import Config
-from ldn_jax.run_dir import RunDir
+from ldn_jax.host.run_dir import RunDir
 
 LOGGERS = ("none", "tensorboard", "wandb")
 

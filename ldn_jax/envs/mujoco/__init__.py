@@ -35,8 +35,8 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from envs.mujoco.model import ModelError
-from envs.mujoco.tasks import TASKS, Physics, Task
+from ldn_jax.envs.mujoco.model import ModelError
+from ldn_jax.envs.mujoco.tasks import TASKS, Physics, Task
 
 Array = jax.Array
 
@@ -64,10 +64,10 @@ def engine(task: str, backend: str):
         raise ValueError(f"unknown MuJoCo task {task!r}; valid tasks: {', '.join(TASKS)}")
     backend = resolve_backend(backend)
     if backend == "native":
-        from envs.mujoco import native
+        from ldn_jax.envs.mujoco import native
 
         return native.engine(TASKS[task])
-    from envs.mujoco import mjx
+    from ldn_jax.envs.mujoco import mjx
 
     return mjx.engine(TASKS[task])
 
@@ -105,7 +105,7 @@ class ContinuousActions:
 
 
 class MujocoEnv:
-    """Any of `TASKS` behind the `envs.base.Env` protocol; the task lives in `EnvParams`."""
+    """Any of `TASKS` behind the `ldn_jax.envs.base.Env` protocol; the task lives in `EnvParams`."""
 
     def reset(self, key: Array, params: EnvParams) -> tuple[Array, EnvState]:
         task, sim = TASKS[params.task], engine(params.task, params.backend)
@@ -178,7 +178,7 @@ def control(task: Task, action: Array) -> Array:
 
 
 def _model(task: str):
-    from envs.mujoco import model
+    from ldn_jax.envs.mujoco import model
 
     return model.load(TASKS[task].asset)
 

@@ -8,8 +8,8 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from ldn_jax.run_dir import RunDir
-from ldn_jax.train import Trainer
+from ldn_jax.host.run_dir import RunDir
+from ldn_jax.trainer import Trainer
 
 
 def load_policy(

@@ -16,8 +16,8 @@ import numpy as np
 from gymnasium.envs.classic_control.cartpole import CartPoleEnv
 from gymnasium.wrappers import RecordVideo, RescaleAction, TimeLimit
 
-import envs
-from envs.mujoco.model import settotalmass_ignored
+from ldn_jax import envs
+from ldn_jax.envs.mujoco.model import settotalmass_ignored
 
 GYMNASIUM_IDS = {
     "cartpole-v1": "CartPole-v1",
@@ -32,7 +32,7 @@ CUSTOM_CARTPOLES = ("cartpole-v0", "cartpole-v2")
 class ForceTable(gymnasium.Wrapper):
     """CartPole with a table of forces instead of gymnasium's two (+-`force_mag`).
 
-    Action i pushes the cart with `forces[i]` newtons, as `envs.cartpole.CartPole` does:
+    Action i pushes the cart with `forces[i]` newtons, as `ldn_jax.envs.cartpole.CartPole` does:
     gymnasium's env applies `+force_mag` for action 1 and `-force_mag` for action 0, so each
     step sets `force_mag = |force|` and picks the sign.
     """

@@ -38,8 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ldn_jax import checkpoint
 from ldn_jax.config import Config, validate
+from ldn_jax.host import checkpoint
 
 RUN_FORMAT = 1
 """Version of the layout (config.json, checkpoints); resume refuses others."""

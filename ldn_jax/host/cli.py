@@ -18,14 +18,14 @@ from pathlib import Path
 import gymnasium
 import numpy as np
 
-from experiments import compare as comparison
-from experiments import gym_eval, run
-from experiments.flags import Parser
-from experiments.plots import compare_runs
-from experiments.settings import UsageError
 from ldn_jax import load_policy
-from ldn_jax.policy import point_index
-from ldn_jax.run_dir import RunDir, RunDirError
+from ldn_jax.host import compare as comparison
+from ldn_jax.host import gym_eval, run
+from ldn_jax.host.flags import Parser
+from ldn_jax.host.plots import compare_runs
+from ldn_jax.host.policy import point_index
+from ldn_jax.host.run_dir import RunDir, RunDirError
+from ldn_jax.host.settings import UsageError
 
 
 def main(argv: list[str] | None = None) -> int:
