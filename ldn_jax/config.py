@@ -1,8 +1,9 @@
 """Typed, frozen configuration: one dataclass per part, presets as data, one-line validation.
 
-The `paper` preset is the reading of the paper pinned down in `shared/PAPER.md`: the paper's
-network sizes and the public A3C CartPole code's constants it matches (gamma 0.9, RMSProp 1e-3,
-n-step 10, entropy 0.001, ReLU6 hidden layers, N(0, 0.1) weights, 8 workers).
+The defaults are the `paper` preset: the paper's network sizes and the public A3C CartPole
+code's constants it matches (gamma 0.9, RMSProp 1e-3, n-step 10, entropy 0.001, ReLU6 hidden
+layers, N(0, 0.1) weights, 8 workers; docs/paper.md). Presets and per-task defaults are data in
+`ldn_jax.presets`; `resolution` applies them in their one order of precedence.
 """
 
 from __future__ import annotations
@@ -14,8 +15,9 @@ import types
 import typing
 from dataclasses import dataclass, field
 
-from ldn_jax import envs, networks
+from ldn_jax import envs, networks, presets
 from ldn_jax.envs.mujoco import BACKEND_CHOICES
+from ldn_jax.presets import Layer
 
 ACTIVATIONS = tuple(networks.ACTIVATIONS)
 """Hidden activations the networks know (`ldn_jax.networks` owns them)."""
@@ -171,8 +173,8 @@ class ModelConfig:
     """`stop` "m2ac": the share of running imagined rollouts kept at each step."""
     oracle_error: float = 0.01
     """`stop` "oracle": the largest true one-step error (L2, the observation's units) that
-    does not stop; about 3 times the median error of an ldn model on cartpole-v2 after 200
-    episodes (0.0036, REPORT.md's calibration)."""
+    does not stop; about 3 times the median one-step error of an ldn model on cartpole-v2
+    after 200 episodes (docs/defaults.md)."""
     action_encoding: str = "one-hot"
     """How the model takes a discrete action, one of `ACTION_ENCODINGS`: "one-hot" (ours,
     the default), "index" (the action's index as one number) or "force" (the force it
@@ -190,7 +192,7 @@ class ModelConfig:
     "batch": a worker whose imagined episode ends starts the next from a fresh initial
     state, until every worker has ended one and at least one segment is full: a fixed
     quota of n_steps x workers imagined steps per iteration, whatever the LD.
-    The PPO family uses "memory" (`LEARNER_DEFAULTS`)."""
+    The PPO family uses "memory" (`ldn_jax.presets.LEARNER`)."""
 
     hidden: int = 200
     """Hidden units of each of the two model nets ((s, a) -> s' and s' -> r)."""
@@ -239,8 +241,7 @@ class Config:
     """Learning-degree gains K (eq. 6), vmapped; K=1 is eq. 4. An algorithm that does not
     stop by the learning degree keeps only the first (`from_preset`): K does nothing there."""
     episodes: int = 1600
-    """Real episodes per seed and K, summed over workers (`from_preset`: `DEFAULT_EPISODES`
-    where an env has its own). Ignored when `steps` is set."""
+    """Real episodes per seed and K, summed over workers. Ignored when `steps` is set."""
     steps: int | None = None
     """Budget in real env steps per seed and K, summed over workers, instead of `episodes`
     (the natural unit where early episodes last 5 steps and late ones 1,000): each run stops
@@ -259,10 +260,8 @@ class Config:
     episode per real episode it ended in the iteration (Algorithm 1's one after each),
     within `iteration_steps` imagined steps (`ModelConfig.imagine` "batch": its fixed
     quota instead).
-    The `paper` preset keeps "episodes", the literal reading; `fast` uses "steps". Measured
-    on Table 2 (cartpole v0/v1/v2, 10 seeds, 1,200 episodes, K = 1; README, schedules),
-    "steps" trained 2-5 times faster per run but took more episodes to the threshold, e.g.
-    a2c 1,015 against 795 and a2c-model 719 against 419 on cartpole-v1 (IQM)."""
+    The `paper` preset keeps "episodes", the literal reading; `fast` uses "steps", which
+    trains faster per run but takes more episodes to the threshold (docs/defaults.md)."""
     iteration_steps: int | None = None
     """Schedule "steps": real steps per worker per iteration, a multiple of `agent.n_steps`
     (None: the env's step limit rounded up to whole segments, so that an iteration is as
@@ -288,8 +287,8 @@ class Config:
     the budget. The evaluation draws from its own keys, so the training up to the stop is
     the run without it, bit for bit."""
     chunk_iterations: int = 5
-    """Iterations per compiled chunk: the host logs and checkpoints between chunks
-    (`from_preset`: `DEFAULT_CHUNK` where an env has its own)."""
+    """Iterations per compiled chunk: the host logs and checkpoints between chunks (MuJoCo
+    tasks: 1, an iteration there is long)."""
     sweep: tuple[tuple[str, tuple[float, ...]], ...] = ()
     """A grid of float fields, `((name, values), ...)` (`agent.actor_lr`, `model.lr`, ...: one
     of `SWEEPABLE`): every combination of the values, for every K, is one point of the
@@ -299,46 +298,21 @@ class Config:
 
     @classmethod
     def from_preset(cls, name: str, **overrides) -> Config:
-        """Build a config from a preset plus top-level overrides (agent/model as dicts).
-
-        What is not given takes its default, the env's own where it has one (`DEFAULT_STEPS`,
-        `DEFAULT_EPISODES`, `DEFAULT_CHUNK`, `CONTINUOUS_DEFAULTS`, `TASK_DEFAULTS`,
-        `TASK_MODEL`); an algorithm that does not use K keeps the first of the K values."""
-        if name not in PRESETS:
-            raise ValueError(f"unknown preset {name!r}; valid presets: {', '.join(PRESETS)}")
-        algo = overrides.get("algo", Config.algo)
-        learner = ALGORITHMS[algo].learner if algo in ALGORITHMS else "a2c"
-        env = overrides.get("env", Config.env)
-        preset = {k: v for k, v in PRESETS[name].items() if k not in ("learners", "envs")}
-        preset |= PRESETS[name].get("learners", {}).get(learner, {})
-        preset |= PRESETS[name].get("envs", {}).get(env, {})
-        if "episodes" in overrides:  # a budget given in episodes replaces the preset's steps
-            preset.pop("steps", None)
-        if env in DEFAULT_STEPS and "episodes" not in overrides:
-            overrides.setdefault("steps", DEFAULT_STEPS[env])
-        episodes = preset.get("episodes", DEFAULT_EPISODES.get(env, Config.episodes))
-        overrides.setdefault("episodes", episodes)
-        overrides.setdefault("chunk_iterations", DEFAULT_CHUNK.get(env, Config.chunk_iterations))
-        agent = dict(LEARNER_DEFAULTS[learner]["agent"])
-        model = dict(LEARNER_DEFAULTS[learner].get("model", {}))
-        if _continuous(env):
-            agent.update(CONTINUOUS_DEFAULTS[learner]["agent"])
-            model.update(CONTINUOUS_MODEL)
-        agent.update(TASK_DEFAULTS.get(env, {}).get(learner, {}))
-        model.update(TASK_MODEL.get(env, {}))
-        agent.update({**preset.get("agent", {}), **overrides.pop("agent", {})})
-        model.update({**preset.get("model", {}), **overrides.pop("model", {})})
-        algorithm = ALGORITHMS.get(algo, ALGORITHMS["ldn"])
-        stop = model.get("stop") or ("ld" if algorithm.ld_stop else "none")
-        if stop == "m2ac":  # M2AC ranks by ensemble disagreement
-            model.setdefault("ld", "ensemble")
-        gains = tuple(overrides.get("k", preset.get("k", Config.k)))
-        overrides["k"] = gains if algorithm.uses_model and stop == "ld" else gains[:1]
-        skip = ("agent", "model", "episodes", "k", *overrides)  # what is given wins
-        top = {k: v for k, v in preset.items() if k not in skip}
-        return cls(
-            preset=name, **top, **overrides, agent=AgentConfig(**agent), model=ModelConfig(**model)
-        )
+        """Build a config from a preset plus overrides (top-level fields; agent and model as
+        dicts): every field takes the last value `resolution` gives it."""
+        given = {name: (value, "given") for name, value in _flat(overrides).items()}
+        merged: dict[str, object] = {}
+        for _, values in resolution(name, given):
+            merged |= values
+        top = {n: v for n, v in merged.items() if "." not in n}
+        top["k"] = tuple(top["k"])
+        parts = {
+            section: kind(
+                **{n.split(".", 1)[1]: v for n, v in merged.items() if n.startswith(f"{section}.")}
+            )
+            for section, kind in SECTIONS.items()
+        }
+        return cls(preset=name, **top, **parts)
 
     @property
     def uses_k(self) -> bool:
@@ -428,209 +402,69 @@ class Config:
         return cls(**data, agent=agent, model=model)
 
 
-LEARNER_DEFAULTS: dict[str, dict] = {
-    "a2c": {"agent": {}},
-    # The paper gives no PPO2 constants: these are rejax's published CartPole PPO ones
-    # (100-step rollouts, 5 epochs x 5 minibatches, gamma 0.99, GAE 0.95, entropy 0.01,
-    # Adam 7.5e-4, clip 0.2, value 0.5, grad norm 0.5) on the paper's networks.
-    "ppo": {
-        "agent": {
-            "gamma": 0.99,
-            "n_steps": 100,
-            "epochs": 5,
-            "minibatches": 5,
-            "entropy_beta": 0.01,
-            "actor_lr": 7.5e-4,
-            "critic_lr": 7.5e-4,
-        },
-        # A PPO update on the few rows of LD-stopped imagined episodes normalises its
-        # advantages over a handful of rows and takes 25 Adam steps on them: PPO2-LDN ended
-        # at a moving return of 79 on inverted_pendulum where PPO2 reached 982. It learns
-        # from full batches of the imaginary memory instead.
-        "model": {"imagine": "memory"},
-    },
-}
-"""Agent and model values that differ by learner; a preset's own values override them."""
-
-CONTINUOUS_DEFAULTS: dict[str, dict] = {
-    # Ours (the paper gives none for continuous control). The tutorial code's entropy 0.01,
-    # actor lr 1e-4 and critic 1e-3 learned nothing on inverted_pendulum in 800 episodes
-    # (moving return 7.7, 6k env steps); measured on inverted_pendulum, 2 seeds, 150k env
-    # steps, the moving return ended at 706-721 with entropy 0, actor 1e-3, critic 3e-3
-    # against 494-569 (critic 1e-3), 142-410 (both 3e-3), 156-316 (gamma 0.99), 415-493
-    # (entropy 0.01). At 5 seeds and 250k steps two of five seeds collapsed (the std shrank
-    # to 0.01 once the pendulum was balanced, then the policy fell to returns of 10); a std
-    # floor of 0.05 kept all five learning (moving return 607-876, entropy 0.001: 443-749),
-    # but over 500k steps seeds still climbed to 819-927 and fell back to 40-330. RMSProp's
-    # eps 1e-10 (TensorFlow 1) makes every step about lr long however small the gradient;
-    # eps 1e-5 (SB3's A2C) damps the updates once the pole is balanced: 5 seeds, 600k steps,
-    # 4 of 5 seeds above 900 at some point (max 899.8-948), final 778-948, greedy eval
-    # 1000 x 5.
-    "a2c": {
-        "agent": {
-            "entropy_beta": 0.0,
-            "actor_lr": 1e-3,
-            "critic_lr": 3e-3,
-            "min_std": 0.05,
-            "rmsprop_eps": 1e-5,
-        }
-    },
-    # PPO's usual MuJoCo constants (no entropy bonus, Adam 3e-4), with SB3's unclipped value
-    # loss and about its number of minibatch steps per row (10 epochs; 10 minibatches of 80
-    # rows). PPO2's value clip of 0.2 is in the critic's units, where returns are hundreds
-    # to thousands. Measured, 1M steps on halfcheetah (2 seeds): final moving return
-    # 1,571 / 824 with value clip 0.2 and 5 x 5 minibatches, 489 / 2,037 without the clip,
-    # 1,792 / 1,638 without it and 10 x 10; inverted_pendulum (5 seeds) then reached 900 at
-    # 236k-259k steps instead of 325k-430k.
-    "ppo": {
-        "agent": {
-            "entropy_beta": 0.0,
-            "actor_lr": 3e-4,
-            "critic_lr": 3e-4,
-            "value_clip": None,
-            "epochs": 10,
-            "minibatches": 10,
-        }
-    },
-}
-"""Extra defaults for continuous-action envs (MuJoCo), applied on top of `LEARNER_DEFAULTS`."""
-
-_LOCOMOTION = {
-    "a2c": {"gamma": 0.99, "actor_lr": 3e-4},
-    "ppo": {"reward_scale": 0.1, "normalize_obs": True},
-}
-TASK_DEFAULTS: dict[str, dict[str, dict]] = dict.fromkeys(
-    ("halfcheetah", "hopper", "walker2d", "ant"), _LOCOMOTION
-)
-"""Agent values of one task and learner, on top of `CONTINUOUS_DEFAULTS` (ours). The A2C
-constants chosen on inverted_pendulum (gamma 0.9, actor lr 1e-3) learn nothing on halfcheetah
-(2 seeds, 300k steps: final moving return -279 / -421, gamma 0.99 alone -300 / -569); actor lr
-3e-4 gave -106 / -143, with gamma 0.99 -196 / 404, and ldn with both rose from -246 to 1,172
-and from -306 to 852 over 1M steps (greedy eval 1,243 / 812). A 1,000-step locomotion task
-needs the longer horizon; hopper, walker2d and ant take the same values unmeasured
-(inverted_pendulum, where gamma 0.99 was worse, and reacher keep the A2C defaults).
-
-PPO on the same four tasks trains on a tenth of the reward and on standardised observations
-(`reward_scale`, `normalize_obs`), as SB3's zoo does with VecNormalize. halfcheetah, 1M steps,
-final moving return: 1,792 / 1,638 without either (2 seeds); reward scale 0.1 alone 2,523 /
-1,783 (2 seeds) but 455-2,526, mean 1,292, at 5 seeds; 0.03 1,501 / 1,609; normalised
-observations alone 1,214 / 2,691; both 1,158-4,561, mean 2,865 (5 seeds, greedy eval mean
-3,150). hopper, walker2d and ant take them unmeasured."""
-
-CONTINUOUS_MODEL = {
-    "normalize": True,
-    "predict_delta": True,
-    "env_reward": True,
-    "activation": "relu",
-    "support": 0.1,
-}
-"""The model for continuous control (ours; the paper gives its linear nets for CartPole only):
-standardised units and state deltas for 11- to 27-dimensional observations, ReLU hidden
-layers, and imagination stopped where it leaves the real data's box (widened by 10%). A
-linear model cannot know inverted_pendulum's rail, where real episodes end: with it,
-a2c-model's seeds climbed to 631-945 and fell back (2 of 5 reached a moving return of 900,
-5 seeds, 600k steps), with the box alone too (2 of 5), and with ReLU alone (2 of 5, highest
-772-989); with ReLU and the box 4 of 5 reached 900 (highest 895-948), and ldn, ppo-model and
-ppo-ldn 5 of 5 (README, MuJoCo)."""
-
-TASK_MODEL: dict[str, dict] = {"ant": {"support": None}}
-"""Model values of one task, on top of `CONTINUOUS_MODEL`. ant has no box: in its 105
-dimensions (27 of position and velocity, 78 of contact forces) every imagined a2c-model
-episode left the box within 1 to 6 steps (1 seed, 39 iterations), which leaves nothing to
-imagine."""
-
-DEFAULT_STEPS = {
-    "inverted_pendulum": 600_000,
-    "halfcheetah": 1_000_000,
-    "hopper": 1_000_000,
-    "walker2d": 1_000_000,
-    "ant": 1_000_000,
-    "reacher": 1_000_000,
-}
-"""Default budgets in env steps (`Config.steps`), where no `episodes` or `steps` is given.
-inverted_pendulum, 5 seeds, native engine, 2 cores: a2c, ldn, ppo, ppo-model and ppo-ldn went
-above a moving return of 900 on every seed within 600k steps, in 147-300 s of training
-(a2c-model 4 of 5: README, MuJoCo). The other tasks: the 1M steps MuJoCo results are usually
-quoted after (rl-baselines3-zoo). `ldn` on halfcheetah with 10 seeds x 3 K trains at about
-30k env steps/s here, so its default run takes about 17 minutes; ant's physics is about 4x
-slower (README, MuJoCo, speed)."""
-
-DEFAULT_EPISODES: dict[str, int] = {}
-"""The `episodes` default where it is not `Config`'s (none now: every MuJoCo task has a
-`DEFAULT_STEPS` budget)."""
-
-DEFAULT_CHUNK = dict.fromkeys((*DEFAULT_EPISODES, *DEFAULT_STEPS), 1)
-"""One iteration per chunk where an iteration is long (MuJoCo): budgets are then not rounded
-up to 5 iterations, and the host logs and checkpoints after each."""
-
-PRESETS: dict[str, dict] = {
-    "paper": {},
-    # The tutorial code's -5 terminal reward, which speeds up CartPole learning at gamma 0.9.
-    "tutorial": {"agent": {"terminal_reward": -5.0}},
-    # The reading of eq. 3 under which LD behaves as Figure 5 shows it (mostly near 1): the
-    # square summed over the 5 outputs and over a batch of 10 samples (`PAPER_FIG5`).
-    "paper-fig5": {"model": {"ld_reduce": "sum", "ld_scale": 10.0}},
-    # Nonlinear dynamics model predicting state deltas.
-    "mlp-model": {"model": {"activation": "relu", "predict_delta": True}},
-    # Ours, for a solved CartPole rather than a paper replica (`FAST_CARTPOLE`); values by
-    # learner ("learners": learner -> preset entries) and by env ("envs": env -> entries).
-    "fast": {
-        "schedule": "steps",
-        "k": (1.0,),
-        "eval_episodes": 32,  # the judge of `solved_return`, and the final evaluation
-        "learners": {
-            "a2c": {
-                "agent": {"gamma": 0.99, "reward_scale": 0.1, "normalize_obs": True},
-                "steps": 600_000,
-            },
-            "ppo": {"steps": 300_000},
-        },
-        # Stop where every greedy episode lasts to the env's step limit.
-        "envs": {
-            "cartpole-v0": {"solved_return": 200.0},
-            "cartpole-v1": {"solved_return": 500.0},
-            "cartpole-v2": {"solved_return": 1000.0},
-        },
-    },
-}
-PAPER_FIG5 = "paper-fig5"
-"""The `paper` preset with eq. 3 read as a sum over the model's 5 outputs and over a batch of
-10 samples (the paper: "the input size is 10 batches"), 50 times the literal sigma2: the
-sum, scaled by 10 (`ld_scale`, so K keeps its meaning). Measured on cartpole-v2 (REPORT.md,
-"The readings of eq. 3": 10 seeds, 2,000 episodes, K = 1), the reading that matches Figure
-5: mean LD 0.997, LD >= 0.9 on 100% of imagined steps, 119 imagined steps per episode
-(Figure 5's 50k over 250-300 episodes imply about 170), and episodes to threshold IQM 639
-[589, 683] against A3C-Model's 576 [541, 625] (Mann-Whitney p = 0.096). The literal mean
-reading: LD 0.057, 1.1 imagined steps per episode, 1,032 episodes; the sum over outputs
-with a 10-step window instead (the window starts empty at each episode, so its first steps
-stop as often as the plain sum's): LD 0.90, LD >= 0.9 on 78% of the first 10k imagined
-steps and 89% after, but 9.3 imagined steps per episode and 930 episodes."""
-
-FAST_CARTPOLE = "fast"
-"""The preset for users who want CartPole solved. Schedule "steps" (nothing idles) and K = 1;
-the A2C family: gamma 0.99, a tenth of the reward and standardised observations, at most
-600k env steps per seed; the PPO family: its defaults, at most 300k. Each run stops where its
-greedy policy first plays every one of 32 evaluation episodes to the step limit
-(`solved_return`, judged after every chunk of 20k env steps per seed). Measured on
-cartpole-v1, greedy eval in gymnasium (`ldn-jax eval`: 100 episodes), 2 cores:
-- schedule "episodes" first: a2c at the paper preset scores 135-486 after 800 episodes (1 of
-  10 seeds at 475); with gamma 0.99 and reward scale 0.1, 5 of 10 after 1,200 episodes; with
-  standardised observations too, 5 of 10 after 1,200 and 10 of 10 after 3,000 (16 s of
-  training); ldn the same, 9 of 10 (55 s); ppo at its defaults 10 of 10 after 800 episodes
-  (21.6 s), with the A2C values 9 of 10 after 3,000.
-- schedule "steps", trained to the whole budget (600k; ppo 200k): 10 of 10 each in one
-  measurement, then 8, 9 or 10 of 10 as the last bits changed (the same code later, the
-  MLP's reordered kernel-gradient sums, two devices): seeds that had learned fell back late.
-- stopped when solved: every seed of 10 and of 20, on one device and on two, for a2c, ldn
-  and ppo (README, "A solved CartPole").
-For CartPole only: MuJoCo's defaults are already ours."""
-
-
 from_preset = Config.from_preset
 """`Config.from_preset`, the name callers import."""
 
 SECTIONS = {"agent": AgentConfig, "model": ModelConfig}
 """`Config`'s nested parts: their fields are named `agent.X` and `model.X`."""
+
+PRESETS = presets.PRESETS
+"""The presets by name (`ldn_jax.presets`)."""
+
+
+def resolution(preset: str, given: dict[str, tuple[object, str]]) -> list[Layer]:
+    """Every layer that sets fields of one run, lowest first (`ldn_jax.presets`' order), for
+    the fields `given` as `{dotted name: (value, where it was given)}`: the defaults, the
+    learner's, continuous control's, the task's, the preset's, each source of `given`, then
+    the rules. A field's value is the last layer's that sets it."""
+    if preset not in PRESETS:
+        raise ValueError(f"unknown preset {preset!r}; valid presets: {', '.join(PRESETS)}")
+    value = lambda name, default: given[name][0] if name in given else default
+    env, algo = value("env", Config.env), value("algo", Config.algo)
+    algorithm = ALGORITHMS.get(algo, ALGORITHMS["ldn"])
+    found = [("default", _defaults())]
+    found += presets.layers(preset, env, algorithm.learner, _continuous(env))
+    sources: dict[str, dict[str, object]] = {}
+    for name, (setting, where) in given.items():
+        sources.setdefault(where, {})[name] = setting
+    found += list(sources.items())
+    merged: dict[str, object] = {}
+    for _, values in found:
+        merged |= values
+    if "episodes" in given and "steps" not in given:
+        found.append(("rule: a budget in episodes replaces the steps budget", {"steps": None}))
+    stop = merged["model.stop"] or ("ld" if algorithm.ld_stop else "none")
+    set_ld = any("model.ld" in values for _, values in found[1:])
+    if stop == "m2ac" and not set_ld:
+        found.append(("rule: stop m2ac ranks by ensemble disagreement", {"model.ld": "ensemble"}))
+    gains = tuple(merged["k"])
+    if not (algorithm.uses_model and stop == "ld") and len(gains) > 1:
+        found.append((f"rule: {algo} does not use K, the first is kept", {"k": gains[:1]}))
+    return found
+
+
+def explain(
+    preset: str, given: dict[str, tuple[object, str]], name: str
+) -> list[tuple[str, object]]:
+    """The layers of `resolution` that set the dotted field `name`, lowest first, with the
+    value each gives it: the last one is the run's."""
+    return [(layer, values[name]) for layer, values in resolution(preset, given) if name in values]
+
+
+def _defaults() -> dict[str, object]:
+    """Every field's dataclass default, by dotted name."""
+    return {name: get_field(Config(), name) for name in fields()}
+
+
+def _flat(overrides: dict) -> dict[str, object]:
+    """`from_preset`'s overrides (agent and model as dicts) by dotted name."""
+    flat = {}
+    for name, value in overrides.items():
+        if name in SECTIONS:
+            flat |= {f"{name}.{sub}": v for sub, v in dict(value).items()}
+        else:
+            flat[name] = value
+    return flat
 
 
 @dataclass(frozen=True)
@@ -723,12 +557,12 @@ def validate(config: Config) -> Config:
         envs.make(config.env)  # raises the registry's one-line error
     if config.algo not in ALGORITHMS:
         raise ValueError(f"unknown algo {config.algo!r}; valid algos: {', '.join(ALGORITHMS)}")
+    agent, model = config.agent, config.model
     checks = [
         (config.seeds >= 1, f"seeds must be >= 1, got {config.seeds}"),
         (
-            config.preset != FAST_CARTPOLE or not _continuous(config.env),
-            f"preset {FAST_CARTPOLE!r} is for CartPole (measured there); MuJoCo tasks have "
-            "their own defaults",
+            config.preset != "fast" or not _continuous(config.env),
+            "preset 'fast' is for CartPole (measured there); MuJoCo tasks have their own defaults",
         ),
         (len(config.k) >= 1, "k needs at least one value"),
         (
@@ -774,6 +608,19 @@ def validate(config: Config) -> Config:
         (config.chunk_iterations >= 1, "chunk_iterations must be >= 1"),
         (0 < config.agent.gamma <= 1, f"gamma must be in (0, 1], got {config.agent.gamma}"),
         (config.agent.n_steps >= 1, "n_steps must be >= 1"),
+        (agent.actor_hidden >= 1, f"actor_hidden must be >= 1, got {agent.actor_hidden}"),
+        (agent.critic_hidden >= 1, f"critic_hidden must be >= 1, got {agent.critic_hidden}"),
+        (agent.init_std > 0, f"agent init_std must be > 0, got {agent.init_std}"),
+        (agent.min_std > 0, f"min_std must be > 0, got {agent.min_std}"),
+        (agent.entropy_beta >= 0, f"entropy_beta must be >= 0, got {agent.entropy_beta}"),
+        (
+            0 <= agent.rmsprop_decay < 1,
+            f"rmsprop_decay must be in [0, 1), got {agent.rmsprop_decay}",
+        ),
+        (agent.rmsprop_eps > 0, f"rmsprop_eps must be > 0, got {agent.rmsprop_eps}"),
+        (agent.value_coef >= 0, f"value_coef must be >= 0, got {agent.value_coef}"),
+        (model.hidden >= 1, f"model hidden must be >= 1, got {model.hidden}"),
+        (model.init_std > 0, f"model init_std must be > 0, got {model.init_std}"),
         (
             config.agent.reward_scale > 0 and math.isfinite(config.agent.reward_scale),
             f"reward_scale must be > 0 and finite, got {config.agent.reward_scale}",
@@ -813,6 +660,9 @@ def validate(config: Config) -> Config:
             f"unknown ld {config.model.ld!r}; valid: {', '.join(LD_ESTIMATORS)}",
         ),
         (config.model.ensemble >= 2, f"ensemble size must be >= 2, got {config.model.ensemble}"),
+        (model.horizon >= 1, f"horizon must be >= 1, got {model.horizon}"),
+        (0 < model.m2ac_keep <= 1, f"m2ac_keep must be in (0, 1], got {model.m2ac_keep}"),
+        (model.oracle_error > 0, f"oracle_error must be > 0, got {model.oracle_error}"),
         *_stop_checks(config),
         (
             config.model.action_encoding in ACTION_ENCODINGS,
@@ -836,6 +686,13 @@ def validate(config: Config) -> Config:
     for ok, message in checks:
         if not ok:
             raise ValueError(message)
+    # Every check holds whatever the algorithm: a value no run could use is refused even where
+    # this run would not read it (a2c has no model, yet model.hidden=-5 is an error).
+    for name, kind in fields().items():
+        value = get_field(config, name)
+        not_a_float = kind.base is not float or kind.sequence or value is None
+        if not (not_a_float or math.isfinite(value)):
+            raise ValueError(f"{name} must be a finite number, got {value}")
     _validate_sweep(config)
     return config
 
@@ -869,12 +726,6 @@ def _stop_checks(config: Config) -> list[tuple[bool, str]]:
             stop != "m2ac" or model.ld == "ensemble",
             "stop 'm2ac' ranks imagined rollouts by ensemble disagreement: it needs ld "
             "'ensemble' (its default)",
-        ),
-        (model.horizon >= 1, f"horizon must be >= 1, got {model.horizon}"),
-        (0 < model.m2ac_keep <= 1, f"m2ac_keep must be in (0, 1], got {model.m2ac_keep}"),
-        (
-            model.oracle_error > 0 and math.isfinite(model.oracle_error),
-            f"oracle_error must be > 0 and finite, got {model.oracle_error}",
         ),
         (
             stop != "oracle" or _observes_state(config.env),

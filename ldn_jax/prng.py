@@ -8,9 +8,7 @@ draw: several per env step (the action, the env's keys, the resets) and one per 
 M1's fit. Written out, XLA fuses the rounds into one kernel. The hash is integer arithmetic,
 so both lowerings give the same bits (tests/test_prng.py).
 
-Measured on 2 cores (cartpole-v1, 10 seeds x 8 workers, schedule "steps", 16 iterations,
-both lowerings of the same chunk timed in turn, same bits): real env steps/s x1.62 for a2c,
-x1.03 a2c-model, x1.18 ldn, x1.11 ppo, x1.10 ppo-ldn.
+It pays most for a2c, where the draws are a larger share of the work (docs/defaults.md).
 
 It applies only inside `written_out(...)`, to the programs the trainer compiles
 (`Trainer.batched_chunk`, `Trainer.batched_evaluate`): the draws keep their bits, but XLA can

@@ -29,13 +29,17 @@ from ldn_jax.config import (
     SCHEDULES,
     STOP_RULES,
     Config,
+    explain,
+    fields,
     from_preset,
     get_field,
+    resolution,
     validate,
 )
 from ldn_jax.host.loggers import LOGGERS
 from ldn_jax.host.settings import (
     UsageError,
+    as_text,
     parse_sweep,
     parse_value,
     read_config_file,
@@ -231,6 +235,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "given, and exit",
     )
     p.add_argument(
+        "--explain",
+        metavar="FIELD",
+        help="print which layers (defaults, learner, continuous control, task, preset, "
+        "--config, flags, --set, rules) set FIELD under the other flags given, and exit",
+    )
+    p.add_argument(
         "--out",
         help="run directory (default runs/ENV-ALGO-TIME); of a grid, the directory of its "
         "runs, DIR/ENV-ALGO (default runs/grid-TIME): the same command again keeps the "
@@ -314,7 +324,7 @@ def grid(args: argparse.Namespace) -> list[argparse.Namespace] | None:
     env_names, algos = names("env"), names("algo")
     if len(env_names) * len(algos) == 1:
         return None
-    for flag in ("resume", "dry_run", "list_fields", "distributed"):
+    for flag in ("resume", "dry_run", "list_fields", "explain", "distributed"):
         if getattr(args, flag):
             raise UsageError(f"{flag_name(flag)} takes one --env and one --algo, not a list")
     return [
@@ -383,6 +393,34 @@ def requested(args: argparse.Namespace) -> tuple[str | None, dict[str, tuple[obj
         settings.pop("steps", None)  # a budget in episodes replaces the file's in steps
         given["steps"] = (None, given["episodes"][1])
     return args.preset or preset, settings | given
+
+
+def explain_field(args: argparse.Namespace, name: str) -> list[str]:
+    """`--explain FIELD`: each layer that sets the field under these flags, lowest first,
+    with its value; the last one is the run's."""
+    if name != "preset" and name not in fields():
+        raise UsageError(f"--explain {name}: unknown config field (--list-fields names them)")
+    preset, given = requested(args)
+    preset = preset or Config.preset
+    if name == "preset":
+        return [f"preset = {preset}"]
+    try:
+        found = explain(preset, given, name)
+    except ValueError as error:
+        raise UsageError(str(error)) from None
+    width = max(len(layer) for layer, _ in found)
+    lines = [f"{name} = {as_text(found[-1][1])}   (preset {preset})"]
+    lines += [f"  {layer:<{width}}  {as_text(value)}" for layer, value in found]
+    return lines
+
+
+def field_sources(args: argparse.Namespace) -> dict[str, str]:
+    """The layer that set each config field under these flags (`--list-fields`)."""
+    preset, given = requested(args)
+    sources = {}
+    for layer, values in resolution(preset or Config.preset, given):
+        sources |= dict.fromkeys(values, layer)
+    return sources
 
 
 def resolve_physics(config: Config) -> Config:

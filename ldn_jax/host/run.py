@@ -63,8 +63,12 @@ def train_one(args, cache, stop: Stop | None = None) -> int:
             flags.check_resume_flags(args, config)
         else:
             config = flags.build_config(args)
+        if args.explain:
+            print("\n".join(flags.explain_field(args, args.explain)))
+            return 0
         if args.list_fields:
-            print("\n".join(settings.list_fields(config)))
+            sources = None if args.resume else flags.field_sources(args)
+            print("\n".join(settings.list_fields(config, sources)))
             return 0
         mesh = runtime.device_mesh(args, config.seeds)
         if args.dry_run:

@@ -152,21 +152,26 @@ def _is(base: type, value) -> bool:
     return isinstance(value, accepted)
 
 
-def list_fields(config: Config) -> list[str]:
+def list_fields(config: Config, sources: dict[str, str] | None = None) -> list[str]:
     """`--list-fields`: one line per config field: its name, type, value in `config` (as
-    `--set` takes it) and the first sentence of its docstring."""
-    table, docs = fields(), field_docs()
+    `--set` takes it), the layer that set it (`sources`, `ldn_jax.config.resolution`'s names;
+    left out where None) and the first sentence of its docstring."""
+    table, docs, sources = fields(), field_docs(), sources or {}
     width = max(map(len, table))
+    setters = max((len(s) for s in sources.values()), default=0) + 2 if sources else 0
+    by = lambda name: f"{'[' + sources[name] + ']':<{setters}}  " if name in sources else ""
     lines = [f"{'preset':<{width}}  {'str':<24}  {config.preset:<12}  one of: {', '.join(PRESETS)}"]
-    swept = " ".join(f"{n}={_as_text(v)}" for n, v in config.sweep) or "none"
+    swept = " ".join(f"{n}={as_text(v)}" for n, v in config.sweep) or "none"
     lines.append(f"{'sweep':<{width}}  {'--sweep FIELD=V1,V2':<24}  {swept:<12}  vmapped grid")
     for name, kind in table.items():
-        value = _as_text(get_field(config, name))
-        lines.append(f"{name:<{width}}  {kind.describe():<24}  {value:<12}  {docs.get(name, '')}")
+        value = as_text(get_field(config, name))
+        line = f"{name:<{width}}  {kind.describe():<24}  {value:<12}  {by(name)}"
+        lines.append(line + docs.get(name, ""))
     return lines
 
 
-def _as_text(value) -> str:
+def as_text(value) -> str:
+    """A value as `--set` takes it."""
     if value is None:
         return "none"
     if isinstance(value, tuple):
