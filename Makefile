@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: run test test-slow lint format bench paper clean
+.PHONY: run test test-slow lint format bench paper docs clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -39,5 +39,9 @@ SCALE ?= cpu
 paper: $(STAMP)
 	$(PY) -m experiments.paper.all --scale $(SCALE)
 
+# The documentation site into site/ (strict: a broken link or a missing page fails it).
+docs: $(STAMP)
+	$(VENV)/bin/mkdocs build --strict
+
 clean:
-	rm -rf $(VENV) .pytest_cache .ruff_cache
+	rm -rf $(VENV) .pytest_cache .ruff_cache site

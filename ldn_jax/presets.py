@@ -10,7 +10,7 @@ A config field takes the value of the last layer that sets it:
    for the env (`"envs"`);
 6. the `--config` file, then the named flags, then `--set` (`ldn_jax.host.flags`).
 
-Then two rules: a budget given in episodes clears the `steps` budget of every layer below it,
+Then three rules: a budget given in episodes clears the `steps` budget of every layer below it,
 and an algorithm whose imagination is not stopped by the learning degree keeps only the first
 K (K does nothing there). `--stop m2ac` defaults `model.ld` to "ensemble".
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from ldn_jax import load_policy
 from ldn_jax.host import compare as comparison
-from ldn_jax.host import gym_eval, run
+from ldn_jax.host import flags, gym_eval, run
 from ldn_jax.host.flags import Parser
 from ldn_jax.host.plots import compare_runs
 from ldn_jax.host.policy import point_index
@@ -41,20 +41,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def evaluate(argv: list[str]) -> int:
     """`ldn-jax eval`: a trained greedy policy in the gymnasium env; writes RUN_DIR/eval.json."""
-    p = Parser(prog="ldn-jax eval", description=evaluate.__doc__)
-    p.add_argument("run_dir", type=Path, help="a finished run directory")
-    p.add_argument("--seed", type=int, default=0, help="which trained seed (default 0)")
-    p.add_argument("--k", type=float, default=None, help="which K (default: the run's first)")
-    p.add_argument(
-        "--at",
-        action="append",
-        default=[],
-        metavar="FIELD=VALUE",
-        help="in a sweep, which point (repeatable; a field left out: its first value)",
-    )
-    p.add_argument("--episodes", type=int, default=100, help="evaluation episodes")
-    p.add_argument("--env-seed", type=int, default=0, help="seed of the first env reset")
-    p.add_argument("--video", type=Path, default=None, help="save videos (rgb_array) here")
+    p = eval_parser()
     try:
         args = p.parse_args(argv)
         config, act, k, point = _load(args)
@@ -137,9 +124,7 @@ def _episode_returns(env: gymnasium.Env, act, args: argparse.Namespace, name: st
 
 def plot(argv: list[str]) -> int:
     """`ldn-jax plot`: overlay runs' moving return vs episodes (mean, 95% band over seeds)."""
-    p = Parser(prog="ldn-jax plot", description=plot.__doc__)
-    p.add_argument("run_dirs", type=Path, nargs="+", metavar="RUN_DIR")
-    p.add_argument("--out", type=Path, default=Path("comparison.png"), help="the PNG to write")
+    p = plot_parser()
     try:
         args = p.parse_args(argv)
         compare_runs(args.run_dirs, args.out)
@@ -157,9 +142,7 @@ def compare(argv: list[str]) -> int:
     """`ldn-jax compare`: runs side by side: IQM over seeds with bootstrap 95% intervals of
     episodes and env steps to threshold, final moving return and greedy eval return, and
     each run's probability of improvement over the first run on its env."""
-    p = Parser(prog="ldn-jax compare", description=compare.__doc__)
-    p.add_argument("run_dirs", type=Path, nargs="+", metavar="RUN_DIR")
-    p.add_argument("--json", type=Path, default=None, help="also write the tables here")
+    p = compare_parser()
     try:
         args = p.parse_args(argv)
         table = comparison.rows(args.run_dirs)
@@ -174,6 +157,50 @@ def compare(argv: list[str]) -> int:
         return 2
     print("\n".join(comparison.render(table, better)))
     return 0
+
+
+def eval_parser() -> Parser:
+    p = Parser(prog="ldn-jax eval", description=evaluate.__doc__)
+    p.add_argument("run_dir", type=Path, help="a finished run directory")
+    p.add_argument("--seed", type=int, default=0, help="which trained seed (default 0)")
+    p.add_argument("--k", type=float, default=None, help="which K (default: the run's first)")
+    p.add_argument(
+        "--at",
+        action="append",
+        default=[],
+        metavar="FIELD=VALUE",
+        help="in a sweep, which point (repeatable; a field left out: its first value)",
+    )
+    p.add_argument("--episodes", type=int, default=100, help="evaluation episodes")
+    p.add_argument("--env-seed", type=int, default=0, help="seed of the first env reset")
+    p.add_argument("--video", type=Path, default=None, help="save videos (rgb_array) here")
+    return p
+
+
+def plot_parser() -> Parser:
+    p = Parser(prog="ldn-jax plot", description=plot.__doc__)
+    p.add_argument("run_dirs", type=Path, nargs="+", metavar="RUN_DIR", help="run directories")
+    p.add_argument("--out", type=Path, default=Path("comparison.png"), help="the PNG to write")
+    return p
+
+
+def compare_parser() -> Parser:
+    p = Parser(prog="ldn-jax compare", description=compare.__doc__)
+    p.add_argument("run_dirs", type=Path, nargs="+", metavar="RUN_DIR", help="run directories")
+    p.add_argument("--json", type=Path, default=None, help="also write the tables here")
+    return p
+
+
+def parsers() -> dict[str, Parser]:
+    """Every subcommand's parser, by the command a user types (the docs' flag tables)."""
+    train = flags.parser()
+    train.prog = "ldn-jax train"
+    return {
+        "ldn-jax train": train,
+        "ldn-jax eval": eval_parser(),
+        "ldn-jax plot": plot_parser(),
+        "ldn-jax compare": compare_parser(),
+    }
 
 
 if __name__ == "__main__":

@@ -94,6 +94,22 @@ CONFIG_FLAGS = {
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    """The training command's flags, checked against each other (`UsageError`)."""
+    args = parser().parse_args(argv)
+    if args.wandb_project is not None and args.logger != "wandb":
+        raise UsageError("--wandb-project needs --logger wandb")
+    if args.checkpoint_every < 0:
+        raise UsageError("--checkpoint-every must be >= 0")
+    cluster = [f for f in ("coordinator", "num_processes", "process_id") if getattr(args, f)]
+    if cluster and not args.distributed:
+        raise UsageError(f"{flag_name(cluster[0])} needs --distributed")
+    if args.distributed and not (args.out or args.resume or args.dry_run):
+        raise UsageError("--distributed needs --out (every process must name the same run)")
+    return args
+
+
+def parser() -> Parser:
+    """The training command's parser (`ldn-jax train`, `python experiments/run.py`)."""
     d = Config()
     p = Parser(description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument(
@@ -292,17 +308,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         action="store_true",
         help="compile the training chunk, print compile seconds, FLOPs and memory, write nothing",
     )
-    args = p.parse_args(argv)
-    if args.wandb_project is not None and args.logger != "wandb":
-        raise UsageError("--wandb-project needs --logger wandb")
-    if args.checkpoint_every < 0:
-        raise UsageError("--checkpoint-every must be >= 0")
-    cluster = [f for f in ("coordinator", "num_processes", "process_id") if getattr(args, f)]
-    if cluster and not args.distributed:
-        raise UsageError(f"{flag_name(cluster[0])} needs --distributed")
-    if args.distributed and not (args.out or args.resume or args.dry_run):
-        raise UsageError("--distributed needs --out (every process must name the same run)")
-    return args
+    return p
 
 
 def grid(args: argparse.Namespace) -> list[argparse.Namespace] | None:
