@@ -1,20 +1,23 @@
-"""One episode per worker, in segments of n steps with a learner update after each.
+"""Workers playing in segments of n steps, with a learner update after each.
 
-The same function plays real episodes (the world is the env) and imagined ones (the world is
-M1): a world is a pure `step(key, world_state, obs, action)`. Workers whose episode has
-ended stay in the batch with weight 0; nothing branches on them. With a `reset`, a worker
-whose episode ends starts the next at once instead (no weight-0 rows), and the batch plays
-whole segments until every worker has ended at least one episode.
-
-`play_steps` is schedule "steps": a fixed number of segments from where the workers stand,
-each worker starting its next episode as one ends, so that nothing idles; the episodes carry
-over from one call to the next (`Workers`).
+The same code plays real episodes (the world is the env) and imagined ones (the world is
+M1): a world is a pure `step(key, world_state, obs, action)`; a `Player` names the learner,
+the world and the step limit. Three entry points:
+- `play_episodes`: one episode per worker. Workers whose episode has ended stay in the batch
+  with weight 0; nothing branches on them.
+- `play_batch`: a worker whose episode ends starts the next at once from `reset` (no
+  weight-0 rows), until every worker has ended at least one episode, or has played its
+  `quota` of episodes.
+- `play_steps` (schedule "steps"): a fixed number of segments from where the workers stand,
+  each worker starting its next episode as one ends, so that nothing idles; the episodes
+  carry over from one call to the next (`Workers`).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import jax
@@ -33,6 +36,27 @@ world_state, reward [W], terminated [W], truncated [W], extras {name: [W]})`. Th
 the one the env executes (continuous actions clipped to the bounds); segments keep the
 policy's sample. `alive` says which workers' steps count (a rule ranking the running
 imagined rollouts reads it); a world may ignore it."""
+
+Reset = Callable[[Array], tuple[Array, Any]]
+"""`reset(key) -> (obs [W, d], world_state)`: fresh starts for every worker."""
+
+
+@dataclass(frozen=True)
+class Player:
+    """Who plays in which world: the static part of a batch's play (one compiled program)."""
+
+    learner: Any
+    """The learner whose policy acts (`ldn_jax.learners`)."""
+    world_step: WorldStep
+    max_steps: int
+    """An episode still running after this many steps is truncated."""
+    learn: bool = True
+    """Update the learner after each segment. False: only play (the learner's parameters
+    act throughout and are returned unchanged; `losses` is empty), for a learner that
+    learns from the whole batch later."""
+    observe: bool = False
+    """Real episodes: each segment's observations go into the learner's running observation
+    statistics (`AgentConfig.normalize_obs`) before it learns from it."""
 
 
 @struct.dataclass
@@ -93,15 +117,12 @@ class Episodes:
 
 
 def _segment_fn(
-    learner: Any,
-    world_step: WorldStep,
-    max_steps: int,
-    reset: Callable[[Array], tuple[Array, Any]] | None,
-    learn: bool,
-    observe: bool,
+    player: Player, reset: Reset | None
 ) -> Callable[[EpisodeCarry, Array], tuple[EpisodeCarry, tuple]]:
     """`(carry, key) -> (carry, (transitions, extras, losses))`: n steps of every worker,
-    then the learner's update (`play_episodes` says what the arguments mean)."""
+    then the learner's update; with `reset`, a worker whose episode ends starts the next."""
+    learner, world_step, max_steps = player.learner, player.world_step, player.max_steps
+    learn, observe = player.learn, player.observe
     n_steps = learner.config.n_steps
 
     def step(carry: EpisodeCarry, key: Array):
@@ -163,45 +184,45 @@ def _segment_fn(
 
 
 def play_episodes(
+    key: Array, learner_state: LearnerState, player: Player, obs: Array, world: Any
+) -> tuple[LearnerState, Episodes]:
+    """One episode on each of W workers from `obs [W, d]` and `world`, the learner updated
+    every `n_steps` steps (unless `player.learn` is False). An episode ends on `terminated`,
+    on `truncated`, or after `player.max_steps` steps; the loop ends once every worker's
+    has."""
+    return _play(key, learner_state, player, obs, world, None, None, None)
+
+
+def play_batch(
     key: Array,
     learner_state: LearnerState,
-    learner: Any,
-    world_step: WorldStep,
+    player: Player,
     obs: Array,
     world: Any,
-    max_steps: int,
-    reset: Callable[[Array], tuple[Array, Any]] | None = None,
-    learn: bool = True,
-    observe: bool = False,
+    reset: Reset,
     quota: Array | None = None,
     segments: int | None = None,
 ) -> tuple[LearnerState, Episodes]:
-    """Play one episode on each of W workers, updating the learner every `n_steps` steps.
+    """Episodes back to back on each of W workers: the first from `obs` and `world`, each
+    next one from `reset` as soon as one ends, so every row of the batch is live. Segments
+    are played until every worker has ended an episode (at least one segment). An episode
+    still running at the batch's end is cut there: its last step bootstraps, as at any
+    segment's end.
 
-    An episode ends on `terminated`, on `truncated`, or after `max_steps` steps.
-
-    `reset(key) -> (obs [W, d], world_state)`: fresh starts for every worker. With it, a
-    worker whose episode ends starts another in the next step, so every row of the batch is
-    live; segments are played until every worker has ended an episode (at least one
-    segment). An episode still running at the batch's end is cut there: its last step
-    bootstraps, as at any segment's end.
-
-    `learn=False`: only play (the learner's parameters act throughout and are returned
-    unchanged; `losses` is empty), for a learner that learns from the whole batch later.
-
-    `observe=True` (real episodes): each segment's observations go into the learner's
-    running observation statistics (`AgentConfig.normalize_obs`) before it learns from it.
-
-    `quota` (`[W]` int, with `reset`): worker w plays `quota[w]` episodes one after the
-    other (none: all its rows weight 0), then idles masked; at most `segments` segments
-    (default: one episode's, `max_steps` rounded up), where the episode still running is cut.
+    `quota` (`[W]` int): worker w plays `quota[w]` episodes one after the other (none: all
+    its rows weight 0), then idles masked; at most `segments` segments (default: one
+    episode's, `max_steps` rounded up), where the episode still running is cut.
     """
+    return _play(key, learner_state, player, obs, world, reset, quota, segments)
+
+
+def _play(key, learner_state, player, obs, world, reset, quota, segments):
+    """`play_episodes` (no `reset`) and `play_batch`."""
+    learner, max_steps = player.learner, player.max_steps
     n_steps = learner.config.n_steps
     n_segments = segments or math.ceil(max_steps / n_steps)
     workers = obs.shape[0]
-    segment = _segment_fn(learner, world_step, max_steps, reset, learn, observe)
-    if quota is not None and reset is None:
-        raise ValueError("a quota of episodes needs `reset` (fresh starts)")
+    segment = _segment_fn(player, reset)
 
     carry = EpisodeCarry(
         learner=learner_state,
@@ -280,21 +301,18 @@ class Completed:
 def play_steps(
     key: Array,
     learner_state: LearnerState,
-    learner: Any,
-    world_step: WorldStep,
+    player: Player,
     workers: Workers,
     segments: int,
-    max_steps: int,
-    reset: Callable[[Array], tuple[Array, Any]],
-    observe: bool = False,
+    reset: Reset,
 ) -> tuple[LearnerState, Episodes, Completed, Workers]:
     """Play `segments` segments of n steps on each of W workers from where they are,
     updating the learner after each (schedule "steps"). A worker whose episode ends
-    (`terminated`, `truncated`, or `max_steps` steps) starts the next from `reset(key)` at
-    once, so every row counts (weight 1) and the loop has a fixed length. Returns the
-    learner, the steps `[T, W, ...]` (T = segments x n), the episodes that ended, and the
-    workers where they stand. `observe` as in `play_episodes`."""
-    segment = _segment_fn(learner, world_step, max_steps, reset, True, observe)
+    (`terminated`, `truncated`, or `player.max_steps` steps) starts the next from
+    `reset(key)` at once, so every row counts (weight 1) and the loop has a fixed length.
+    Returns the learner, the steps `[T, W, ...]` (T = segments x n), the episodes that
+    ended, and the workers where they stand."""
+    segment = _segment_fn(player, reset)
     n = workers.obs.shape[0]
     carry = EpisodeCarry(
         learner=learner_state,

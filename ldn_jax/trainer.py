@@ -29,7 +29,16 @@ from ldn_jax.learners.base import LearnerState
 from ldn_jax.learners.ppo import Memory
 from ldn_jax.learning_degree import ld_histogram
 from ldn_jax.prng import written_out
-from ldn_jax.rollout import Completed, Episodes, Workers, play_episodes, play_steps, workers_init
+from ldn_jax.rollout import (
+    Completed,
+    Episodes,
+    Player,
+    Workers,
+    play_batch,
+    play_episodes,
+    play_steps,
+    workers_init,
+)
 from ldn_jax.sharding import compiler_options, shard_seeds
 
 Array = jax.Array
@@ -187,32 +196,17 @@ class Trainer:
         """One real episode per worker from fresh starts (schedule "episodes")."""
         k_reset, k_play = jax.random.split(key)
         obs, env_state = self._reset(k_reset)
-        learner, episodes = play_episodes(
-            k_play,
-            state.learner,
-            self.learner,
-            self._env_world,
-            obs,
-            env_state,
-            self.max_steps,
-            observe=True,
-        )
+        player = Player(self.learner, self._env_world, self.max_steps, observe=True)
+        learner, episodes = play_episodes(k_play, state.learner, player, obs, env_state)
         return state.replace(learner=learner), episodes
 
     def real_steps(self, state: TrainState, key: Array) -> tuple[TrainState, Episodes, Completed]:
         """`config.steps_per_iteration` real steps per worker from where the workers stand
         (schedule "steps"); the episodes that ended on the way."""
         segments = self.config.steps_per_iteration // self.config.agent.n_steps
+        player = Player(self.learner, self._env_world, self.max_steps, observe=True)
         learner, episodes, completed, workers = play_steps(
-            key,
-            state.learner,
-            self.learner,
-            self._env_world,
-            state.workers,
-            segments,
-            self.max_steps,
-            reset=self._reset,
-            observe=True,
+            key, state.learner, player, state.workers, segments, self._reset
         )
         return state.replace(learner=learner, workers=workers), episodes, completed
 
@@ -264,19 +258,14 @@ class Trainer:
         memory = self.config.model.imagine == "memory"
         if memory:
             k_play, k_learn = jax.random.split(k_play)
-        learner, episodes = play_episodes(
-            k_play,
-            state.learner,
-            self.learner,
-            world,
-            obs,
-            history,
-            imagined_steps_limit(self.config.model, rule, self.max_steps),
-            reset=reset,
-            learn=not memory,
-            quota=quota,
-            segments=segments,
-        )
+        limit = imagined_steps_limit(self.config.model, rule, self.max_steps)
+        player = Player(self.learner, world, limit, learn=not memory)
+        if reset is None:
+            learner, episodes = play_episodes(k_play, state.learner, player, obs, history)
+        else:
+            learner, episodes = play_batch(
+                k_play, state.learner, player, obs, history, reset, quota, segments
+            )
         if memory:
             learner, state_memory, losses = self.learner.learn_from_memory(
                 learner, state.memory, episodes.steps, k_learn

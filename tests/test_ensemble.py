@@ -29,7 +29,7 @@ from ldn_jax.learning_degree import (
     ensemble_stop_probability,
     relative_disagreement,
 )
-from ldn_jax.rollout import play_episodes
+from ldn_jax.rollout import Player, play_episodes
 from ldn_jax.trainer import Trainer
 from tests.test_core import _cartpole_transitions
 
@@ -175,8 +175,8 @@ def test_equal_members_never_stop_and_step_as_one_model():
     dynamics, model, world = _world(members_equal=True, ld_stop=True, error_scale=1e-6)
     learner = A2C(AgentConfig(), obs_size=4, action_spec=2)
     obs = jax.random.uniform(jax.random.key(2), (64, 4), minval=-0.05, maxval=0.05)
-    _, episodes = jax.jit(play_episodes, static_argnums=(2, 3, 6))(
-        jax.random.key(3), learner.init(jax.random.key(4)), learner, world, obs, None, 50
+    _, episodes = jax.jit(play_episodes, static_argnums=2)(
+        jax.random.key(3), learner.init(jax.random.key(4)), Player(learner, world, 50), obs, None
     )
     np.testing.assert_array_equal(np.asarray(episodes.lengths), 50)
     np.testing.assert_array_equal(np.asarray(episodes.extras["ld"]), 1.0)

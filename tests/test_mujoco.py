@@ -307,7 +307,7 @@ def test_a_model_mujoco_cannot_load_is_one_line(tmp_path, monkeypatch):
 
 def test_a_mujoco_run_prints_no_library_noise():
     code = (
-        "import jax, envs\n"
+        "import jax\nfrom ldn_jax import envs\n"
         "envs.mujoco.engine('halfcheetah', 'mjx')\n"  # imports mujoco.mjx (warp messages)
         "env, params = envs.make('halfcheetah')\n"
         "jax.jit(lambda k: env.reset(k, params)[0])(jax.random.key(0)).block_until_ready()\n"

@@ -11,7 +11,7 @@ from ldn_jax.dynamics import Dynamics
 from ldn_jax.imagination import _joined, ld_history, model_world, stop_rule
 from ldn_jax.learners.a2c import A2C
 from ldn_jax.learning_degree import deviation, disagreement, learning_degree, windowed
-from ldn_jax.rollout import play_episodes
+from ldn_jax.rollout import Player, play_episodes
 
 M1 = jnp.array([1.0, 2.0, 0.0, 0.0, 1.0])
 M0 = jnp.zeros(5)
@@ -70,9 +70,9 @@ def test_imagined_steps_read_the_configured_deviation(reduce="sum", window=3, sc
     gain = jnp.float32(0.5)
     world = model_world(dynamics, model, never, encode, None, gain, stop_rule(config, "none"))
     obs = jax.random.uniform(jax.random.key(2), (3, 4), minval=-0.05, maxval=0.05)
-    _, episodes = jax.jit(play_episodes, static_argnums=(2, 3, 6))(
-        jax.random.key(3), learner.init(jax.random.key(4)), learner, world, obs,
-        ld_history(dynamics, 3), 12,
+    _, episodes = jax.jit(play_episodes, static_argnums=2)(
+        jax.random.key(3), learner.init(jax.random.key(4)), Player(learner, world, 12), obs,
+        ld_history(dynamics, 3),
     )  # fmt: skip
     steps = episodes.steps
     action = encode(steps.action)

@@ -18,7 +18,7 @@ from ldn_jax.host import checkpoint
 from ldn_jax.host.metrics import run_crossing, threshold_crossing
 from ldn_jax.host.run_dir import read_config as read_run_config
 from ldn_jax.host.training import Interrupted, train
-from ldn_jax.rollout import play_episodes
+from ldn_jax.rollout import Player, play_batch
 from ldn_jax.trainer import Trainer
 from tests.test_resume import StopAfter, _lines
 from tests.test_scale import _run
@@ -222,18 +222,9 @@ def test_a_quota_of_imagined_episodes_plays_each_workers_owed_episodes(played):
     obs = jnp.zeros((4, 4))
     reset = lambda key: (obs, jnp.zeros(4, jnp.int32))
     params = learner.init(jax.random.key(0))
-    _, episodes = play_episodes(
-        jax.random.key(1),
-        params,
-        learner,
-        world_step,
-        obs,
-        jnp.zeros(4, jnp.int32),
-        1000,
-        reset=reset,
-        learn=False,
-        quota=quota,
-        segments=2,
+    player = Player(learner, world_step, 1000, learn=False)
+    _, episodes = play_batch(
+        jax.random.key(1), params, player, obs, jnp.zeros(4, jnp.int32), reset, quota, segments=2
     )
     np.testing.assert_array_equal(episodes.lengths, [0, 3, 6, 20])
     np.testing.assert_array_equal(episodes.ended, [0, 1, 2, 6])

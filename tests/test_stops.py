@@ -19,7 +19,7 @@ from ldn_jax.imagination import (
     stop_rule,
 )
 from ldn_jax.learners.a2c import A2C
-from ldn_jax.rollout import play_episodes
+from ldn_jax.rollout import Player, play_episodes
 from ldn_jax.trainer import Trainer
 
 NEVER = lambda obs: jnp.zeros(obs.shape[:-1], bool)
@@ -37,8 +37,8 @@ def _play(config: ModelConfig, rule, workers=8, max_steps=50):
     world = model_world(dynamics, model, NEVER, ENCODE, None, jnp.float32(1.0), rule)
     obs = jax.random.uniform(jax.random.key(2), (workers, 4), minval=-0.05, maxval=0.05)
     limit = imagined_steps_limit(config, config.stop or "none", max_steps)
-    _, episodes = jax.jit(play_episodes, static_argnums=(2, 3, 6))(
-        jax.random.key(3), learner.init(jax.random.key(4)), learner, world, obs, None, limit
+    _, episodes = jax.jit(play_episodes, static_argnums=2)(
+        jax.random.key(3), learner.init(jax.random.key(4)), Player(learner, world, limit), obs, None
     )
     return dynamics, model, episodes
 

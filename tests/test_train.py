@@ -10,7 +10,7 @@ from ldn_jax.config import AgentConfig, ModelConfig, from_preset
 from ldn_jax.dynamics import MIN_WIDTH, Dynamics
 from ldn_jax.imagination import model_world, stop_rule
 from ldn_jax.learners.a2c import A2C
-from ldn_jax.rollout import play_episodes
+from ldn_jax.rollout import Player, play_batch, play_episodes
 from ldn_jax.trainer import Trainer
 
 
@@ -31,16 +31,11 @@ def _play_scripted(end_at, terminal, n_steps, max_steps, reset=False):
     `reset`: workers restart from the same zero start."""
     learner = A2C(AgentConfig(n_steps=n_steps), obs_size=2, action_spec=2)
     start = (jnp.zeros((len(end_at), 2)), jnp.zeros(len(end_at), jnp.int32))
-    _, episodes = play_episodes(
-        jax.random.key(1),
-        learner.init(jax.random.key(0)),
-        learner,
-        _scripted_world(end_at, terminal),
-        *start,
-        max_steps=max_steps,
-        reset=(lambda key: start) if reset else None,
-    )
-    return episodes
+    player = Player(learner, _scripted_world(end_at, terminal), max_steps)
+    params = learner.init(jax.random.key(0))
+    if reset:
+        return play_batch(jax.random.key(1), params, player, *start, lambda key: start)[1]
+    return play_episodes(jax.random.key(1), params, player, *start)[1]
 
 
 def test_masks_end_episodes_and_stop_learning():
@@ -48,9 +43,8 @@ def test_masks_end_episodes_and_stop_learning():
     state = learner.init(jax.random.key(0))
     world = _scripted_world([3, 6, 1], [True, False, False])
     obs = jnp.zeros((3, 2))
-    _, episodes = play_episodes(
-        jax.random.key(1), state, learner, world, obs, jnp.zeros(3, jnp.int32), max_steps=20
-    )
+    player = Player(learner, world, max_steps=20)
+    _, episodes = play_episodes(jax.random.key(1), state, player, obs, jnp.zeros(3, jnp.int32))
     weight = np.asarray(episodes.steps.weight)
     np.testing.assert_array_equal(weight.sum(0), [3, 6, 1])
     for w, n in enumerate([3, 6, 1]):
@@ -75,14 +69,15 @@ def test_fully_masked_segment_leaves_learner_bitwise_unchanged():
     state = learner.init(jax.random.key(0))
     world = _scripted_world([1, 1], [True, True])
     # One live step, then nothing: the update of the segment holding it is the only change.
+    player = Player(learner, world, 30)
     new, _ = play_episodes(
-        jax.random.key(1), state, learner, world, jnp.zeros((2, 4)), jnp.zeros(2, jnp.int32), 30
+        jax.random.key(1), state, player, jnp.zeros((2, 4)), jnp.zeros(2, jnp.int32)
     )
     segment = jax.tree.map(
         lambda x: x[:10],
-        play_episodes(
-            jax.random.key(1), state, learner, world, jnp.zeros((2, 4)), jnp.zeros(2, jnp.int32), 30
-        )[1].steps,
+        play_episodes(jax.random.key(1), state, player, jnp.zeros((2, 4)), jnp.zeros(2, jnp.int32))[
+            1
+        ].steps,
     )
     expected, _ = learner.update(state, segment)
     for a, b in zip(jax.tree.leaves(new), jax.tree.leaves(expected), strict=True):
@@ -128,8 +123,8 @@ def _imagine(ld_stop, trained, bounds=None):
     gain = jnp.float32(1.0)
     world = model_world(dynamics, model, never_terminal, encode, None, gain, _rule(ld_stop))
     obs = jax.random.uniform(jax.random.key(2), (64, 4), minval=-0.05, maxval=0.05)
-    _, episodes = jax.jit(play_episodes, static_argnums=(2, 3, 6))(
-        jax.random.key(3), learner.init(jax.random.key(4)), learner, world, obs, None, 50
+    _, episodes = jax.jit(play_episodes, static_argnums=2)(
+        jax.random.key(3), learner.init(jax.random.key(4)), Player(learner, world, 50), obs, None
     )
     return episodes
 

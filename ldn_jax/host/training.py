@@ -128,8 +128,8 @@ def train(config: Config, out: Path, options: TrainOptions | None = None, **fiel
             chunk_fn, lower_s, compile_s = compile_chunk(trainer, states, k, mesh, bitwise)
             if session["compile_seconds"] is None:
                 session["compile_seconds"] = lower_s + compile_s
-            loop = (chunk_fn, states, k, history, session, progress, reported)
-            states = _train_chunks(config, options, run, *loop)
+            loop = ChunkLoop(config, options, run, history, session, progress, reported)
+            states = _train_chunks(loop, chunk_fn, states, k)
         if found is None or found.name != FINAL:
             run.save_checkpoint(FINAL, states, history, session, writer)
         progress.update(history, f"evaluating: {config.eval_episodes} greedy episodes per run...")
@@ -154,9 +154,27 @@ def train(config: Config, out: Path, options: TrainOptions | None = None, **fiel
     return summary
 
 
-def _train_chunks(config, options, run, chunk_fn, states, k, history, session, progress, reported):
+@dataclasses.dataclass
+class ChunkLoop:
+    """What the host keeps between compiled chunks: the run, its history and its session."""
+
+    config: Config
+    options: TrainOptions
+    run: RunDir
+    history: dict
+    """Metric name -> the chunks' arrays so far (updated in place)."""
+    session: dict
+    """Chunks done, their end times, compile seconds, resumes (updated in place)."""
+    progress: Progress
+    reported: set
+    """The failures already reported (non-finite losses), so each is said once."""
+
+
+def _train_chunks(loop: ChunkLoop, chunk_fn, states, k):
     """Run chunks until the budget is spent, writing metrics and checkpoints between them;
-    returns the states. `history` and `session` are updated in place."""
+    returns the states."""
+    config, options, run = loop.config, loop.options, loop.run
+    history, session, progress, reported = loop.history, loop.session, loop.progress, loop.reported
     writer = jax.process_index() == 0
     logger = options.logger or NullLogger()
     stop = options.stop or Stop()  # one never installed asks for nothing
