@@ -405,3 +405,20 @@ def test_report_is_generated_from_the_result_files(smoke, tmp_path):
     text = report.render(tmp_path, report.common.SCALES["smoke"])
     assert "123.4 ± 5.6" in text
     assert "Not produced yet (run `figure9.py`)" in text
+
+
+def test_an_underpowered_mujoco_comparison_says_inconclusive_with_its_budget():
+    from experiments.paper.report_format import inconclusive
+    from experiments.paper.report_mujoco import table5_finding
+
+    assert inconclusive("halfcheetah", steps=200_000) == (
+        "inconclusive at this budget (200 episodes per seed, 12% of the paper's >= 1,734)"
+    )
+    assert inconclusive("hopper", episodes=400).startswith("inconclusive at this budget (400 ")
+    assert inconclusive("hopper", episodes=2_000) is None  # the paper's budget or more
+    assert inconclusive("cartpole-v2", episodes=10) is None  # the paper's CartPole budgets
+    row = {"mean": None, "episodes_per_seed": 400.0, "env_steps_per_seed": 52_000.0}
+    finding = table5_finding("hopper", {"ppo": row, "ppo-ldn": row})
+    assert finding.endswith("inconclusive at this budget (400 episodes per seed, 23% of the "
+                            "paper's >= 1,734).")  # fmt: skip
+    assert "NOT reproduced" not in finding

@@ -52,6 +52,7 @@ def panel(entry: dict) -> dict:
         "env": entry["env"],
         "seeds": entry["config"].seeds,
         "episodes": entry["config"].episodes,
+        "steps": entry["config"].steps,
         "budget": common.budget_text(entry["config"]),
         "train_seconds": entry["summary"]["train_seconds"],
         "compile_seconds": entry["summary"]["compile_seconds"],

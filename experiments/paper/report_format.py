@@ -105,6 +105,29 @@ def mann_whitney(x: list, y: list) -> str:
     return "too few runs to test" if p is None else f"Mann-Whitney p = {p:.2g}"
 
 
+PAPER_MUJOCO_EPISODES = 1_734
+"""The fewest episodes the paper trained a MuJoCo run for: Table 5's tops came after 1,734 to
+2,603 episodes (of up to 1,000 steps each); Table 4 and Figure 9 state no budget."""
+
+
+def inconclusive(env: str, episodes: float | None = None, steps: float | None = None) -> str | None:
+    """ "inconclusive at this budget (...)" for a MuJoCo run trained for fewer episodes than
+    the paper's, where a difference the paper found may simply not have appeared yet; None
+    where the budget is the paper's or more (or the env is CartPole). `steps` bounds the
+    episodes from above (an episode lasts at most 1,000 steps) where they are not known."""
+    if env not in common.MUJOCO:
+        return None
+    if episodes is None and steps is not None:
+        episodes = steps / 1_000
+    if episodes is None or episodes >= PAPER_MUJOCO_EPISODES:
+        return None
+    share = episodes / PAPER_MUJOCO_EPISODES
+    return (
+        f"inconclusive at this budget ({episodes:,.0f} episodes per seed, {share:.0%} of the "
+        f"paper's >= {PAPER_MUJOCO_EPISODES:,})"
+    )
+
+
 def budget(record: dict) -> str:
     """A run's budget per seed as its result file states it (files from before step
     budgets give episodes only)."""

@@ -12,6 +12,7 @@ from experiments.paper.report_format import (
     budget,
     by_env,
     fmt,
+    inconclusive,
     iqm,
     mann_whitney,
     mann_whitney_p,
@@ -62,12 +63,17 @@ def table4_section(table: dict) -> Section:
         model, ldn = algos["a2c-model"], algos["ldn"]
         x, y = ldn["final_moving_returns"], model["final_moving_returns"]
         p, test = mann_whitney_p(x, y), mann_whitney(x, y)
+        short = inconclusive(env, ldn.get("episodes_per_seed"), ldn.get("env_steps_per_seed"))
         if p is None or p >= 0.05:
-            verdict = "no significant difference (the paper: MBRL-LDN higher): NOT reproduced"
+            verdict = "no significant difference (the paper: MBRL-LDN higher): " + (
+                short or "NOT reproduced"
+            )
         elif ldn["mean"] > model["mean"]:
             verdict = "REPRODUCED (MBRL-LDN higher, as in the paper)"
         else:
-            verdict = "NOT reproduced: A3C-Model higher (the paper: MBRL-LDN higher)"
+            verdict = "A3C-Model higher (the paper: MBRL-LDN higher): " + (
+                short or "NOT reproduced"
+            )
         findings.append(
             f"Table 4, {env} ({budget(ldn)}): MBRL-LDN {ldn['mean']:.1f} vs "
             f"A3C-Model {model['mean']:.1f} final moving return ({test}, "
@@ -113,14 +119,20 @@ def table5_section(table: dict) -> Section:
 def table5_finding(env: str, algos: dict[str, dict]) -> str:
     means = {a: r["mean"] for a, r in algos.items() if r["mean"] is not None}
     if not means:
-        return f"Table 5, {env}: no run reached the top within the budget."
+        some = next(iter(algos.values()))
+        short = inconclusive(env, some.get("episodes_per_seed"), some.get("env_steps_per_seed"))
+        return f"Table 5, {env}: no run reached the top within the budget" + (
+            f": {short}." if short else "."
+        )
     order = sorted(means, key=means.get)
     ours = " < ".join(f"{algo_name(a)} ({means[a]:.0f})" for a in order)
     reached = ", ".join(f"{algo_name(a)} {r['reached']}/{r['runs']}" for a, r in algos.items())
+    some = next(iter(algos.values()))
+    short = inconclusive(env, some.get("episodes_per_seed"), some.get("env_steps_per_seed"))
     verdict = (
         "REPRODUCED (PPO2-LDN fewest, as in the paper)"
         if order[0] == "ppo-ldn" and len(means) == len(algos)
-        else "NOT reproduced (the paper: PPO2-LDN fewest)"
+        else f"{short or 'NOT reproduced'} (the paper: PPO2-LDN fewest)"
     )
     final = {a: r["final_moving_return"]["mean"] for a, r in algos.items()}
     unreached = [a for a, r in algos.items() if r["reached"] == 0]

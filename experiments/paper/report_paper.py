@@ -16,6 +16,7 @@ from experiments.paper.report_format import (
     budget,
     by_env,
     fmt,
+    inconclusive,
     iqm,
     mann_whitney_p,
     pm,
@@ -290,10 +291,14 @@ def figure9_findings(panel: dict) -> list[str]:
     if not means:
         return []
     best = better(means, key=means.get)
+    steps = panel.get("steps")
+    if "steps" not in panel and panel.get("budget", "").endswith(" steps"):  # older files
+        steps = float(panel["budget"].split()[0].replace(",", ""))
+    short = inconclusive(panel["env"], None if steps else panel.get("episodes"), steps)
     verdict = (
         "REPRODUCED (K = 1 best, as in the paper)"
         if best == 1.0
-        else "NOT reproduced (the paper: K = 1 slightly best)"
+        else f"{short or 'NOT reproduced'} (the paper: K = 1 slightly best)"
     )
     text = ", ".join(f"K={k:g}: {m:.0f}" for k, m in means.items())
     tests, significant = [], False
