@@ -34,7 +34,8 @@ bench: $(STAMP)
 	$(PY) -m bench.bench $(BENCH_ARGS)
 
 # The paper's results into experiments/results/ (REPORT.md there): CartPole, inverted_pendulum and a
-# short halfcheetah run on CPU; SCALE=paper for the larger budget and every MuJoCo task.
+# short halfcheetah run on CPU; SCALE=cpu-full for every MuJoCo result at 1M env steps per
+# run (hours; cached and resumed), SCALE=paper for the paper's episode budgets (a GPU's).
 # Training runs are kept in experiments/results/runs/ and reused.
 SCALE ?= cpu
 paper: $(STAMP)

@@ -267,6 +267,10 @@ class Config:
     (None: the env's step limit rounded up to whole segments, so that an iteration is as
     long as the longest episode and M1 is fitted once per episode's worth of steps, as the
     paper fits it once per episode late in training)."""
+    max_steps: int | None = None
+    """Episode step limit; None: the env's own (gymnasium's: 1,000 for the MuJoCo tasks but
+    reacher's 50, CartPole v0/v1/v2 200/500/1,000). The paper ran reacher for 1,000 steps:
+    its reproduction sets that here. `ldn-jax eval` plays gymnasium's env with this limit."""
     backend: str = "auto"
     """MuJoCo tasks: physics engine, "native" (MuJoCo's C engine, the fast one on CPU), "mjx"
     (MJX, for GPU/TPU) or "auto" (native on CPU, mjx elsewhere; a run records what it
@@ -365,7 +369,12 @@ class Config:
         if self.iteration_steps is not None:
             return self.iteration_steps
         n = self.agent.n_steps
-        return math.ceil(envs.make(self.env)[1].max_steps / n) * n
+        return math.ceil(self.episode_limit / n) * n
+
+    @property
+    def episode_limit(self) -> int:
+        """The episode step limit this run plays with (`max_steps`, or the env's)."""
+        return self.max_steps or envs.make(self.env)[1].max_steps
 
     @property
     def iterations(self) -> int:
@@ -378,7 +387,7 @@ class Config:
         if self.schedule == "steps":
             steps = self.steps
             if steps is None:
-                steps = self.episodes * envs.make(self.env)[1].max_steps
+                steps = self.episodes * self.episode_limit
             per_chunk *= self.steps_per_iteration
             return math.ceil(steps / per_chunk) * self.chunk_iterations
         real_episodes = self.episodes if self.steps is None else self.steps
@@ -395,6 +404,8 @@ class Config:
     def from_dict(cls, data: dict) -> Config:
         data = dict(data)
         data.pop("run_format", None)  # the run directory's format version, not a setting
+        if data.get("env") == "reacher" and "max_steps" not in data:
+            data["max_steps"] = 1000  # a run from before reacher took gymnasium's 50 steps
         agent = AgentConfig(**data.pop("agent", {}))
         model = ModelConfig(**data.pop("model", {}))
         data["k"] = tuple(data.get("k", (1.0,)))
@@ -581,6 +592,10 @@ def validate(config: Config) -> Config:
         (config.episodes >= 1, f"episodes must be >= 1, got {config.episodes}"),
         (config.steps is None or config.steps >= 1, f"steps must be >= 1, got {config.steps}"),
         (config.workers >= 1, f"workers must be >= 1, got {config.workers}"),
+        (
+            config.max_steps is None or config.max_steps >= 1,
+            f"max_steps must be >= 1 (or none: the env's), got {config.max_steps}",
+        ),
         (
             config.schedule in SCHEDULES,
             f"unknown schedule {config.schedule!r}; valid: {', '.join(SCHEDULES)}",

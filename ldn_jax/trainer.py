@@ -115,6 +115,8 @@ class Trainer:
         self.config = config
         self.env, params = envs.make(config.env)
         self.env_params = self.env.with_backend(params, config.backend)
+        if config.max_steps is not None:
+            self.env_params = self.env_params.replace(max_steps=config.max_steps)
         self.obs_size = self.env.observation_size(self.env_params)
         self.action_spec = self.env.action_spec(self.env_params)
         self.max_steps = self.env_params.max_steps

@@ -358,3 +358,28 @@ def test_native_run_resumes_to_the_bit(tmp_path):
     assert _lines(resumed) == _lines(reference)
     final = lambda run: np.load(run / "checkpoints" / "final.host.npz")["history/moving_after"]
     np.testing.assert_array_equal(final(resumed), final(reference))
+
+
+def test_every_task_plays_gymnasiums_step_limit_and_the_paper_reacher_its_1000():
+    import gymnasium
+
+    from experiments.paper import common
+    from ldn_jax.config import Config, from_preset
+    from ldn_jax.host import gym_eval
+    from ldn_jax.trainer import Trainer
+
+    for task, spec in envs.mujoco.TASKS.items():
+        limit = gymnasium.spec(spec.gymnasium_id).max_episode_steps
+        assert envs.make(task)[1].max_steps == limit, task
+    assert from_preset("paper", env="reacher", algo="ldn").episode_limit == 50
+    assert gym_eval.make_env("reacher").spec.max_episode_steps == 50
+    # The paper's reproduction runs reacher for the paper's 1,000 steps, and so does its eval.
+    paper = common.run_config(common.SCALES["cpu"], "reacher", "ldn")
+    assert paper.max_steps == paper.episode_limit == 1000
+    assert gym_eval.make_env("reacher", max_steps=1000).spec.max_episode_steps == 1000
+    # A run from before the limit was a setting resumes with the 1,000 steps it trained with.
+    stored = from_preset("paper", env="reacher", algo="ldn").to_dict()
+    del stored["max_steps"]
+    assert Config.from_dict(stored).episode_limit == 1000
+    cartpole = from_preset("paper", env="cartpole-v1", algo="a2c", max_steps=7)
+    assert Trainer(cartpole).max_steps == 7 and cartpole.steps_per_iteration == 10

@@ -422,3 +422,16 @@ def test_an_underpowered_mujoco_comparison_says_inconclusive_with_its_budget():
     assert finding.endswith("inconclusive at this budget (400 episodes per seed, 23% of the "
                             "paper's >= 1,734).")  # fmt: skip
     assert "NOT reproduced" not in finding
+
+
+def test_the_cpu_full_scale_runs_every_mujoco_table_at_1m_steps_with_5_seeds():
+    from experiments.paper import common
+
+    scale = common.SCALES["cpu-full"]
+    assert set(scale.mujoco_budgets) == set(common.MUJOCO)  # Table 4's six tasks
+    assert set(scale.ablation_envs) == set(common.MUJOCO)  # Figure 9's MuJoCo panels
+    for env in common.MUJOCO:  # Table 5's inverted_pendulum, halfcheetah, hopper among them
+        config = common.run_config(scale, env, "ppo-ldn")
+        assert (config.seeds, config.steps, config.episode_limit) == (5, 1_000_000, 1000)
+    cartpole = common.run_config(scale, "cartpole-v2", "ldn")
+    assert cartpole == common.run_config(common.SCALES["cpu"], "cartpole-v2", "ldn")

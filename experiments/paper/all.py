@@ -1,6 +1,6 @@
 """Every paper script in order, in one process (`make paper`), then REPORT.md.
 
-    python -m experiments.paper.all [--scale cpu|paper] [--smoke] [--results DIR]
+    python -m experiments.paper.all [--scale cpu|cpu-full|paper] [--smoke] [--results DIR]
 
 The same as running table2.py, table3.py, figure4.py, figure5.py, figure9.py, calibration.py,
 stops.py, table4.py, table5.py, targets.py and report.py one after the other with the same

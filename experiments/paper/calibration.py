@@ -1,6 +1,6 @@
 """LD calibration: does the learning degree know when the model is wrong?
 
-    python -m experiments.paper.calibration [--scale cpu|paper] [--smoke] [--results DIR]
+    python -m experiments.paper.calibration [--scale cpu|cpu-full|paper] [--smoke] [--results DIR]
 
 MBRL-LDN on cartpole-v2 (the Table 2 run's config and seeds, K = 1) is analysed after a few
 numbers of real episodes (cpu: 200, 800, 2000): the earlier points by retraining that config

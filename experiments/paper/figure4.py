@@ -1,7 +1,7 @@
 """Figure 4: learning curves on CartPole v0/v1/v2 (moving return vs real episodes, mean and
 95% band over seeds), A2C vs A2C-Model vs MBRL-LDN, from the Table 2 runs.
 
-    python -m experiments.paper.figure4 [--scale cpu|paper] [--smoke] [--results DIR]
+    python -m experiments.paper.figure4 [--scale cpu|cpu-full|paper] [--smoke] [--results DIR]
 
 Writes figure4.png and figure4.csv (per env, algo and logged point: episodes, mean, band)
 into DIR/figure4/.

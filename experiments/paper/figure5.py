@@ -1,7 +1,7 @@
 """Figure 5: the distribution of the learning degree over imagined steps during cartpole-v2
 training (the Table 2 runs: MBRL-LDN, and A2C-Model whose imagination ignores LD).
 
-    python -m experiments.paper.figure5 [--scale cpu|paper] [--smoke] [--results DIR]
+    python -m experiments.paper.figure5 [--scale cpu|cpu-full|paper] [--smoke] [--results DIR]
 
 Training records, per iteration, how many imagined steps fell in each LD bin of width 0.1
 (the `ld_histogram` metric). Two x axes, both per seed and summed over seeds, in bins of

@@ -2,7 +2,7 @@
 per env (every K shares the seeds' initialisations): cartpole-v2, and the six MuJoCo tasks
 (the CPU scale at short budgets).
 
-    python -m experiments.paper.figure9 [--scale cpu|paper] [--smoke] [--results DIR]
+    python -m experiments.paper.figure9 [--scale cpu|cpu-full|paper] [--smoke] [--results DIR]
 
 Writes figure9.json, figure9.csv and figure9.png (per env: learning curves per K, and episodes
 to threshold per K, or the final moving return where the env has no threshold) into

@@ -1,7 +1,7 @@
 """REPORT.md from the result files: every table beside the paper's numbers, what reproduced
 and what did not, the machine and the commands.
 
-    python -m experiments.paper.report [--scale cpu|paper] [--smoke] [--results DIR]
+    python -m experiments.paper.report [--scale cpu|cpu-full|paper] [--smoke] [--results DIR]
 
 Reads DIR/<result>/*.json (a result not produced yet is reported as missing) and writes
 DIR/REPORT.md. It trains nothing.

@@ -1,7 +1,7 @@
 """The learning degree examined: the readings of eq. 3, and the stopping rules of imagination
 side by side (ours; the paper has neither study).
 
-    python -m experiments.paper.stops [--scale cpu|paper] [--smoke] [--results DIR]
+    python -m experiments.paper.stops [--scale cpu|cpu-full|paper] [--smoke] [--results DIR]
         [--study readings|rules] [--envs ENV,...]
 
 `--study` runs one of the two studies (default: both); `--envs` runs the rules study on

@@ -1,7 +1,7 @@
 """Table 2 and Figure 6: real episodes until the moving return reaches the threshold
 (150 on CartPole v0/v1, 100 on v2), A2C vs A2C-Model vs MBRL-LDN, paper preset, K = 1.
 
-    python -m experiments.paper.table2 [--scale cpu|paper] [--smoke] [--results DIR]
+    python -m experiments.paper.table2 [--scale cpu|cpu-full|paper] [--smoke] [--results DIR]
 
 Writes table2.json, table2.csv and figure6.png into DIR/table2/. Its runs are shared with
 table3.py and figure4.py (and figure5.py reads the cartpole-v2 ldn one).

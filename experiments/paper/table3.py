@@ -1,7 +1,7 @@
 """Table 3: wall-clock seconds until the moving return reaches the threshold, from the Table 2
 runs (trained by table2.py, or here if missing).
 
-    python -m experiments.paper.table3 [--scale cpu|paper] [--smoke] [--results DIR]
+    python -m experiments.paper.table3 [--scale cpu|cpu-full|paper] [--smoke] [--results DIR]
 
 Our seconds are those of one compiled program running every seed of a run at once (vmapped),
 compilation excluded and reported apart: `seconds` is when a seed crossed, in the wall time of

@@ -1,6 +1,6 @@
 """Table 4: total moving reward on six MuJoCo tasks, A2C-Model vs MBRL-LDN.
 
-    python -m experiments.paper.table4 [--scale cpu|paper] [--smoke] [--results DIR]
+    python -m experiments.paper.table4 [--scale cpu|cpu-full|paper] [--smoke] [--results DIR]
 
 "Total moving reward" is read as the final moving return (the paper's numbers exceed what
 some tasks can score in 1,000 steps, so compare the two algorithms, not the values). Both

@@ -1,7 +1,7 @@
 """Table 5: PPO2 vs PPO2-Model vs PPO2-LDN on InvertedPendulum, HalfCheetah and Hopper:
 episodes to reach the top.
 
-    python -m experiments.paper.table5 [--scale cpu|paper] [--smoke] [--results DIR]
+    python -m experiments.paper.table5 [--scale cpu|cpu-full|paper] [--smoke] [--results DIR]
 
 The paper does not define "the top". Ours, per task: 90% of the highest moving return any
 run of the three algorithms reached (`TOP_FRACTION`); a run's episodes to the top count real

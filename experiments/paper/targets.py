@@ -1,7 +1,7 @@
 """The MuJoCo targets at the default budgets: every algorithm on inverted_pendulum, the user's
 halfcheetah command, and PPO on halfcheetah.
 
-    python -m experiments.paper.targets [--scale cpu|paper] [--smoke] [--results DIR]
+    python -m experiments.paper.targets [--scale cpu|cpu-full|paper] [--smoke] [--results DIR]
 
 Not a table of the paper: what a user gets from the defaults (`DEFAULT_STEPS`), checked
 against the targets the project set itself.

@@ -23,9 +23,13 @@ MUJOCO_NAMES = tuple(mujoco.TASKS)
 
 
 def _mujoco(name: str) -> Callable[[], tuple[Any, Any]]:
-    # The paper's 1,000-step episodes; the engine is picked by platform until
-    # `params.replace(backend=...)` names one.
-    return lambda: (mujoco.MujocoEnv(), mujoco.EnvParams(task=name, backend="auto", max_steps=1000))
+    # Gymnasium's step limits (1,000; reacher 50), so that `ldn-jax eval` plays the task that
+    # was trained; the engine is picked by platform until `params.replace(backend=...)`.
+    limit = mujoco.TASKS[name].step_limit
+    return lambda: (
+        mujoco.MujocoEnv(),
+        mujoco.EnvParams(task=name, backend="auto", max_steps=limit),
+    )
 
 
 _REGISTRY: dict[str, Callable[[], tuple[Any, Any]]] = {

@@ -45,7 +45,8 @@ def evaluate(argv: list[str]) -> int:
     try:
         args = p.parse_args(argv)
         config, act, k, point = _load(args)
-        env = gym_eval.make_env(config.env, render_mode="rgb_array" if args.video else None)
+        render = "rgb_array" if args.video else None
+        env = gym_eval.make_env(config.env, render, max_steps=config.episode_limit)
         name = f"seed{args.seed}_k{k:g}" + "".join(f"_{n}={v:g}" for n, v in point.items())
         returns = _episode_returns(env, act, args, name)
     except (UsageError, ValueError) as error:

@@ -55,22 +55,26 @@ def gymnasium_name(env: str) -> str:
     return GYMNASIUM_IDS[env]
 
 
-def make_env(env: str, render_mode: str | None = None) -> gymnasium.Env:
-    """The gymnasium env matching our env `env`. Raises ValueError for a name with none."""
+def make_env(
+    env: str, render_mode: str | None = None, max_steps: int | None = None
+) -> gymnasium.Env:
+    """The gymnasium env matching our env `env`, truncated after `max_steps` steps (None:
+    gymnasium's own limit, which is ours). Raises ValueError for a name with none."""
     if render_mode == "rgb_array":
         # Offscreen frames need no display; without this, SDL looks for one and complains.
         os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
     if env in CUSTOM_CARTPOLES:
         _, params = envs.make(env)
         base = ForceTable(CartPoleEnv(render_mode=render_mode), params.forces)
-        return TimeLimit(base, max_episode_steps=params.max_steps)
+        return TimeLimit(base, max_episode_steps=max_steps or params.max_steps)
     if env in GYMNASIUM_IDS:
         with settotalmass_ignored():  # HalfCheetah-v5's model warns on every compile
-            made = gymnasium.make(GYMNASIUM_IDS[env], render_mode=render_mode)
+            limit = {} if max_steps is None else {"max_episode_steps": max_steps}
+            made = gymnasium.make(GYMNASIUM_IDS[env], render_mode=render_mode, **limit)
         ours, params = envs.make(env)
         spec = ours.action_spec(params)
         if not spec.discrete:  # our bounds ([-1, 1]) onto gymnasium's (e.g. [-3, 3])
-            made = RescaleAction(made, np.asarray(spec.low), np.asarray(spec.high))
+            made = RescaleAction(made, np.float32(spec.low), np.float32(spec.high))
         return made
     valid = ", ".join(sorted({*GYMNASIUM_IDS, *CUSTOM_CARTPOLES}))
     raise ValueError(f"env {env!r} has no gymnasium counterpart; those with one: {valid}")

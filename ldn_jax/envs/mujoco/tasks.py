@@ -124,6 +124,8 @@ class Task:
     """Bodies whose frame positions the task reads: `Physics.xpos`."""
     contact_forces: bool = False
     """The task reads `cfrc_ext` (computed after each step)."""
+    step_limit: int = 1000
+    """Gymnasium's episode step limit for the task (its `max_episode_steps`)."""
 
 
 def _never(obs: Array) -> Array:
@@ -308,6 +310,7 @@ TASKS: dict[str, Task] = {
         is_terminal=_never,
         reward_from_obs=_reacher_reward_from_obs,
         tracked_bodies=("fingertip", "target"),
+        step_limit=50,
     ),
     "walker2d": Task(
         gymnasium_id="Walker2d-v5",
