@@ -43,7 +43,7 @@ paper: $(STAMP)
 
 # The documentation site into site/ (strict: a broken link or a missing page fails it).
 docs: $(STAMP)
-	$(VENV)/bin/mkdocs build --strict
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
 
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache site
