@@ -93,6 +93,9 @@ class AgentConfig:
     """Hidden units of the actor's single hidden layer."""
     critic_hidden: int = 100
     """Hidden units of the critic's single hidden layer."""
+    hidden_layers: int = 1
+    """Hidden layers of actor and critic, each `actor_hidden` / `critic_hidden` wide (1: the
+    paper's three-layer nets; SB3's zoo uses 2 of 256 for MuJoCo)."""
     activation: str = "relu6"
     """Hidden activation of actor and critic."""
     init_std: float = 0.1
@@ -105,6 +108,11 @@ class AgentConfig:
     do not move them."""
     min_std: float = 1e-4
     """Continuous actions: the Gaussian policy's std is softplus(.) + min_std."""
+    log_std_init: float | None = None
+    """Continuous actions: None, the std is an output of the actor (softplus(.) + `min_std`,
+    the tutorial code's); a number, the std is exp of a learned log std per action
+    dimension, the same in every state, starting at this value (SB3's PPO: 0; its zoo's
+    MuJoCo runs: -2)."""
     terminal_reward: float | None = None
     """If set, the training reward of a terminating step is replaced by this value (the
     tutorial code uses -5). Reported returns are always the environment's own."""
@@ -512,10 +520,11 @@ def fields() -> dict[str, FieldType]:
 def sweepable() -> tuple[str, ...]:
     """The fields a sweep can vary (`Config.sweep`): every float field the compiled program
     reads as a number. Not: K (`k` is its own axis), `threshold` (read by the host, after
-    training), the initialisers' `init_std` (they shape the network modules), and every
-    int, bool or str field (sizes, counts, choices: they change the program's shapes or
-    code, so they need separate runs)."""
-    excluded = {"threshold", "agent.init_std", "model.init_std"}
+    training), the initialisers' `init_std` and `log_std_init` (read where the parameters
+    are made; `init_std` shapes the network modules), and every int, bool or str field
+    (sizes, counts, choices: they change the program's shapes or code, so they need separate
+    runs)."""
+    excluded = {"threshold", "agent.init_std", "model.init_std", "agent.log_std_init"}
     return tuple(
         name
         for name, kind in fields().items()
@@ -625,6 +634,11 @@ def validate(config: Config) -> Config:
         (config.agent.n_steps >= 1, "n_steps must be >= 1"),
         (agent.actor_hidden >= 1, f"actor_hidden must be >= 1, got {agent.actor_hidden}"),
         (agent.critic_hidden >= 1, f"critic_hidden must be >= 1, got {agent.critic_hidden}"),
+        (agent.hidden_layers >= 1, f"hidden_layers must be >= 1, got {agent.hidden_layers}"),
+        (
+            agent.log_std_init is None or _continuous(config.env),
+            "log_std_init is for continuous actions (a Gaussian policy's std)",
+        ),
         (agent.init_std > 0, f"agent init_std must be > 0, got {agent.init_std}"),
         (agent.min_std > 0, f"min_std must be > 0, got {agent.min_std}"),
         (agent.entropy_beta >= 0, f"entropy_beta must be >= 0, got {agent.entropy_beta}"),

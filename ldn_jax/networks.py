@@ -78,19 +78,21 @@ def dense_dot_general(x: Array, kernel: Array, dimension_numbers, precision=None
 
 
 class MLP(nn.Module):
-    """Input -> one hidden layer -> output (the paper's "three-layer" net)."""
+    """Input -> `layers` hidden layers of `hidden` units -> output (one: the paper's
+    "three-layer" net)."""
 
     hidden: int
     out: int
     activation: str
     init_std: float
+    layers: int = 1
 
     @nn.compact
     def __call__(self, x: Array) -> Array:
         init = normal_init(self.init_std)
         dense = lambda size: nn.Dense(size, kernel_init=init, dot_general=dense_dot_general)
-        x = dense(self.hidden)(x)
-        x = ACTIVATIONS[self.activation](x)
+        for _ in range(self.layers):
+            x = ACTIVATIONS[self.activation](dense(self.hidden)(x))
         return dense(self.out)(x)
 
 

@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from ldn_jax.config import AgentConfig, from_preset
+from ldn_jax.config import AgentConfig, from_preset, validate
 from ldn_jax.learners import A2C, PPO
 from ldn_jax.learners.base import OBS_CLIP, Gaussian, Segment, merge_moments, training_reward
 
@@ -231,3 +231,27 @@ def test_ldn_trains_on_inverted_pendulum_end_to_end(tmp_path):
     assert summary["imagined_steps"] > 0
     action = load_policy(tmp_path)(np.zeros(4, np.float32))
     assert action.shape == (1,) and action.dtype == np.float32 and -3.0 <= action[0] <= 3.0
+
+
+def test_a_state_independent_log_std_starts_at_its_value_and_learns():
+    config = AgentConfig(log_std_init=-2.0, hidden_layers=2, actor_hidden=16, critic_hidden=8)
+    learner = PPO(config, obs_size=2, action_spec=Box((-1.0, -1.0), (1.0, 1.0)))
+    state = learner.init(jax.random.key(0))
+    # two hidden layers of the width asked for, then the mean's two outputs (no std outputs)
+    kernels = [layer["kernel"].shape for layer in state.params["actor"]["params"].values()]
+    assert kernels == [(2, 16), (16, 16), (16, 2)]
+    assert [k.shape for k in jax.tree.leaves(state.params["critic"])][1::2] == [
+        (2, 8), (8, 8), (8, 1)
+    ]  # fmt: skip
+    obs = jax.random.normal(jax.random.key(1), (5, 2)) * 10  # any state: the same std
+    _, std = learner.policy.mean_std(learner.logits(state.params, obs))
+    np.testing.assert_allclose(np.asarray(std), np.exp(-2.0), rtol=1e-6)
+    segment = _bandit_segment(jax.random.key(2), n=6, workers=3)
+    segment = segment.replace(action=jnp.concatenate([segment.action] * 2, -1))
+    new, _ = jax.jit(learner.update)(state, segment, jax.random.key(3))
+    assert not np.allclose(np.asarray(new.params["log_std"]), -2.0)  # the actor's optimiser
+
+
+def test_log_std_init_is_refused_for_discrete_actions():
+    with pytest.raises(ValueError, match="log_std_init is for continuous actions"):
+        validate(from_preset("paper", env="cartpole-v1", algo="ppo", agent={"log_std_init": 0.0}))

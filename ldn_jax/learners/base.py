@@ -167,17 +167,28 @@ class Gaussian:
 
     discrete = False
 
-    def __init__(self, low: tuple[float, ...], high: tuple[float, ...], min_std: float):
+    def __init__(
+        self,
+        low: tuple[float, ...],
+        high: tuple[float, ...],
+        min_std: float,
+        log_std: bool = False,
+    ):
         self.low = jnp.asarray(low, jnp.float32)
         self.high = jnp.asarray(high, jnp.float32)
         self.min_std = min_std
+        self.log_std = log_std
+        """The std's half of the output is a log std (state-independent, `log_std_init`)."""
         self.size = len(low)
         self.out_size = 2 * self.size
+        self.net_out_size = self.size if log_std else self.out_size
         self.model_action_size = self.size
 
     def mean_std(self, out: Array) -> tuple[Array, Array]:
         centre, bound = (self.high + self.low) / 2, (self.high - self.low) / 2
         mean = centre + jnp.tanh(out[..., : self.size]) * bound
+        if self.log_std:
+            return mean, jnp.exp(out[..., self.size :])
         std = jax.nn.softplus(out[..., self.size :]) + self.min_std
         return mean, std
 
@@ -203,13 +214,15 @@ class Gaussian:
         return self.env_action(action)
 
 
-def make_policy(action_spec, min_std: float = 1e-4) -> Categorical | Gaussian:
+def make_policy(
+    action_spec, min_std: float = 1e-4, log_std: bool = False
+) -> Categorical | Gaussian:
     """The policy head for an env's `action_spec` (or a plain count of discrete actions)."""
     if isinstance(action_spec, int):
         return Categorical(action_spec)
     if action_spec.discrete:
         return Categorical(action_spec.size)
-    return Gaussian(tuple(action_spec.low), tuple(action_spec.high), min_std)
+    return Gaussian(tuple(action_spec.low), tuple(action_spec.high), min_std, log_std)
 
 
 class ActorCritic:
@@ -225,9 +238,13 @@ class ActorCritic:
         """`action_spec`: an env's `ActionSpec`, or the number of discrete actions."""
         self.config = config
         self.obs_size = obs_size
-        self.policy = make_policy(action_spec, config.min_std)
-        mlp = lambda hidden, out: MLP(hidden, out, config.activation, config.init_std)
-        self.actor = mlp(config.actor_hidden, self.policy.out_size)
+        log_std = config.log_std_init is not None
+        self.policy = make_policy(action_spec, config.min_std, log_std)
+        mlp = lambda hidden, out: MLP(
+            hidden, out, config.activation, config.init_std, config.hidden_layers
+        )
+        out_size = getattr(self.policy, "net_out_size", self.policy.out_size)
+        self.actor = mlp(config.actor_hidden, out_size)
         self.critic = mlp(config.critic_hidden, 1)
 
     def init(self, key: Array) -> LearnerState:
@@ -237,6 +254,8 @@ class ActorCritic:
             "actor": self.actor.init(k_actor, dummy),
             "critic": self.critic.init(k_critic, dummy),
         }
+        if getattr(self.policy, "log_std", False):
+            params["log_std"] = jnp.full((self.policy.size,), self.config.log_std_init)
         if self.config.normalize_obs:
             params["obs_norm"] = {
                 "mean": jnp.zeros((self.obs_size,)),
@@ -246,12 +265,14 @@ class ActorCritic:
         return LearnerState(params=params, opt_state=self.optimizer.init(params))
 
     def per_net(self, actor, critic) -> optax.GradientTransformation:
-        """One optimiser for the actor's parameters and one for the critic's; the
-        observation statistics of `normalize_obs`, which no gradient moves, get none."""
+        """One optimiser for the actor's parameters (its log std too) and one for the
+        critic's; the observation statistics of `normalize_obs`, which no gradient moves, get
+        none."""
         transforms = {"actor": actor, "critic": critic}
         if self.config.normalize_obs:
             transforms["fixed"] = optax.set_to_zero()
-        labels = lambda params: {n: n if n in ("actor", "critic") else "fixed" for n in params}
+        owner = {"actor": "actor", "log_std": "actor", "critic": "critic"}
+        labels = lambda params: {n: owner.get(n, "fixed") for n in params}
         return optax.multi_transform(transforms, labels)
 
     def observe(self, state: LearnerState, obs: Array, weight: Array) -> LearnerState:
@@ -271,8 +292,12 @@ class ActorCritic:
         return jnp.clip(z, -OBS_CLIP, OBS_CLIP)
 
     def logits(self, params: dict, obs: Array) -> Array:
-        """The actor's raw output: logits (discrete) or mean and std pre-activations."""
-        return self.actor.apply(params["actor"], self.normalized(params, obs))
+        """The actor's raw output: logits (discrete) or mean and std pre-activations (the
+        learned log std broadcast beside the mean, under `log_std_init`)."""
+        out = self.actor.apply(params["actor"], self.normalized(params, obs))
+        if "log_std" not in params:
+            return out
+        return jnp.concatenate([out, jnp.broadcast_to(params["log_std"], out.shape)], -1)
 
     def value(self, params: dict, obs: Array) -> Array:
         return self.critic.apply(params["critic"], self.normalized(params, obs))[..., 0]
