@@ -256,7 +256,7 @@ def run_config(scale: Scale, env: str, algo: str, k: tuple[float, ...] = (1.0,),
     the scripts report such rows as pending (MuJoCo tasks outside `scale.mujoco_budgets`,
     which this scale does not budget).
 
-    MuJoCo runs take `scale.mujoco_seeds` and the env's own chunk (`DEFAULT_CHUNK`: one
+    MuJoCo runs take `scale.mujoco_seeds` and the env's own chunk (`ldn_jax.presets.TASKS`: one
     iteration, up to 8,000 env steps per seed). `model` overrides `ModelConfig` fields."""
     if env in MUJOCO:
         if env not in scale.mujoco_budgets:

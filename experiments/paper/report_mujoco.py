@@ -180,7 +180,7 @@ def _span(values: list, digits: int = 0) -> str:
 def targets_section(record: dict) -> Section:
     intro = (
         "What the defaults deliver (not a table of the paper): each run at its default budget "
-        "(`DEFAULT_STEPS`), as `python experiments/run.py --env ENV --algo ALGO --seeds N` "
+        "(`ldn_jax.presets.TASKS`), as `python experiments/run.py --env ENV --algo ALGO --seeds N` "
         "starts it. Curves: ![targets](targets/targets.png)"
     )
     rows = [r for r in record["rows"] if r["status"] == "done"]

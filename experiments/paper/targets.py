@@ -3,7 +3,7 @@ halfcheetah command, and PPO on halfcheetah.
 
     python -m experiments.paper.targets [--scale cpu|cpu-full|paper] [--smoke] [--results DIR]
 
-Not a table of the paper: what a user gets from the defaults (`DEFAULT_STEPS`), checked
+Not a table of the paper: what a user gets from the defaults (`ldn_jax.presets.TASKS`), checked
 against the targets the project set itself.
 - inverted_pendulum, each of the six algorithms, 5 seeds, K = 1: a moving return >= 900 on at
   least 4 of 5 seeds within the default budget, in under 15 minutes of training.
