@@ -58,7 +58,7 @@ def fields_table() -> str:
 def presets_table() -> str:
     rows = ["| preset | for | sets |", "|---|---|---|"]
     for name, entry in presets.PRESETS.items():
-        parts = [f"`{k}={settings.as_text(v)}`" for k, v in presets._fields(entry).items()]
+        parts = [f"`{k}={settings.as_text(v)}`" for k, v in presets.own_fields(entry).items()]
         for kind in ("learners", "envs"):
             for key, values in entry.get(kind, {}).items():
                 inner = ", ".join(f"`{k}={settings.as_text(v)}`" for k, v in values.items())

@@ -187,3 +187,35 @@ def test_a_bad_setting_exits_2_with_one_line_from_the_command():
     )
     assert result.returncode == 2 and result.stderr.count("\n") == 1, result.stderr
     assert "did you mean agent.gamma?" in result.stderr
+
+
+def test_explain_lists_every_layer_that_sets_a_field_in_order(tmp_path):
+    path = tmp_path / "c.json"
+    path.write_text(json.dumps({"agent": {"actor_lr": 5e-4}}))
+    args = ["--env", "halfcheetah", "--algo", "ppo", "--config", str(path)]
+    lines = flags.explain_field(
+        flags.parse_args([*args, "--set", "agent.actor_lr=1e-4"]), "agent.actor_lr"
+    )
+    assert lines[0] == "agent.actor_lr = 0.0001   (preset paper)"
+    layers = [line.split()[0] for line in lines[1:]]
+    assert layers == ["default", "learner", "continuous", "--config", "--set"]
+    assert [line.split()[-1] for line in lines[1:]] == [
+        "0.001",
+        "0.00075",
+        "0.0003",
+        "0.0005",
+        "0.0001",
+    ]
+    k = flags.explain_field(flags.parse_args(["--algo", "ppo-model", "--k", "0.5,1"]), "k")
+    assert k[-1].split()[-1] == "0.5" and "does not use K" in k[-1]
+    sources = flags.field_sources(flags.parse_args(["--env", "hopper", "--algo", "ppo"]))
+    assert sources["steps"] == "task hopper" and sources["agent.gamma"] == "learner ppo"
+    assert sources["seeds"] == "default"
+
+
+def test_a_value_no_run_could_use_is_refused_whatever_the_algorithm():
+    assert (
+        refused("--algo", "a2c", "--set", "model.hidden=-5") == "model hidden must be >= 1, got -5"
+    )
+    assert "horizon must be >= 1" in refused("--algo", "ldn", "--set", "model.horizon=0")
+    assert "agent.critic_lr must be a finite number" in refused("--set", "agent.critic_lr=inf")

@@ -414,6 +414,11 @@ def explain_field(args: argparse.Namespace, name: str) -> list[str]:
         found = explain(preset, given, name)
     except ValueError as error:
         raise UsageError(str(error)) from None
+    if args.config is not None and name in given:  # the file's value, if a flag replaced it
+        _, from_file = read_config_file(args.config)
+        if name in from_file and from_file[name][1] != given[name][1]:
+            at = next(i for i, (layer, _) in enumerate(found) if layer == given[name][1])
+            found.insert(at, (from_file[name][1], from_file[name][0]))
     width = max(len(layer) for layer, _ in found)
     lines = [f"{name} = {as_text(found[-1][1])}   (preset {preset})"]
     lines += [f"  {layer:<{width}}  {as_text(value)}" for layer, value in found]
