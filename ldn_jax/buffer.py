@@ -66,3 +66,20 @@ def buffer_sample(buffer: Buffer, key: Array, batch_size: int) -> Transitions:
     """Uniform draw with replacement from the stored transitions."""
     index = jax.random.randint(key, (batch_size,), 0, jnp.maximum(buffer.size, 1))
     return jax.tree.map(lambda d: d[index], buffer.data)
+
+
+HOLDOUT_EVERY = 10
+"""One slot in this many (slots 0, 10, 20, ...) is held out from a probabilistic model's fit,
+to rank its members (`ModelConfig.elites`)."""
+
+
+def buffer_sample_split(buffer: Buffer, key: Array, batch_size: int, held_out: bool) -> Transitions:
+    """Uniform draw with replacement from the held-out slots (every `HOLDOUT_EVERY`th) or
+    from the others."""
+    size = buffer.size
+    held = (size + HOLDOUT_EVERY - 1) // HOLDOUT_EVERY
+    count = held if held_out else size - held
+    j = jax.random.randint(key, (batch_size,), 0, jnp.maximum(count, 1))
+    index = j * HOLDOUT_EVERY if held_out else j + j // (HOLDOUT_EVERY - 1) + 1
+    index = jnp.minimum(index, jnp.maximum(size - 1, 0))
+    return jax.tree.map(lambda d: d[index], buffer.data)

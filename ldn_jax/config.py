@@ -23,26 +23,35 @@ ACTIVATIONS = tuple(networks.ACTIVATIONS)
 """Hidden activations the networks know (`ldn_jax.networks` owns them)."""
 
 IMAGINE_MODES = ("episodes", "memory", "batch")
+"""How the imagined stage feeds the learner (`ModelConfig.imagine`)."""
+
+IMAGINE_STARTS = ("initial", "real")
+"""Where imagined rollouts start (`ModelConfig.imagine_start`): a fresh initial state (the
+paper's), or a state of the real buffer (branched, ours in the style of MBPO)."""
 
 SCHEDULES = ("episodes", "steps")
 """What one iteration of real play is (`Config.schedule`)."""
-"""How the imagined stage feeds the learner (`ModelConfig.imagine`)."""
 
 LD_REDUCTIONS = ("mean", "sum")
 """How eq. 3's square is reduced over the model's outputs (`ModelConfig.ld_reduce`)."""
 
-STOP_RULES = ("ld", "m2ac", "horizon", "oracle", "none")
+STOP_RULES = ("ld", "m2ac", "macura", "horizon", "mbpo", "oracle", "none")
 """What ends an imagined episode early (`ModelConfig.stop`; predicted termination and the
 step limit always do): the learning-degree draw (MBRL-LDN), an M2AC-style rank mask on
-ensemble disagreement, a fixed horizon (MBPO's rollout length), an oracle on the true
-one-step error, or nothing (A3C-Model)."""
+ensemble disagreement, a MACURA-style adaptive threshold on it, a fixed horizon (MBPO's
+rollout length), MBPO's horizon schedule, an oracle on the true one-step error, or nothing
+(A3C-Model)."""
+
+ENSEMBLE_RULES = ("m2ac", "macura")
+"""The stopping rules that read an ensemble's disagreement (they need `ld` "ensemble")."""
 
 ACTION_ENCODINGS = ("one-hot", "index", "force")
 """How the dynamics model takes a discrete action (`ModelConfig.action_encoding`)."""
 
-LD_ESTIMATORS = ("m0", "ensemble")
-"""How the learning degree is estimated: M1 against its frozen initial copy M0 (eq. 3-6), or
-the disagreement of an ensemble of models (`ldn_jax.learning_degree`)."""
+LD_ESTIMATORS = ("m0", "ensemble", "variance")
+"""How the learning degree is estimated: M1 against its frozen initial copy M0 (eq. 3-6), the
+disagreement of an ensemble of models, or a probabilistic ensemble's own predicted variance
+(`ldn_jax.learning_degree`)."""
 
 
 @dataclass(frozen=True)
@@ -106,6 +115,12 @@ class AgentConfig:
     `ldn_jax.learners.base`), as SB3's VecNormalize does. The statistics live in the
     parameters (`params["obs_norm"]`), so a saved policy carries them; imagined observations
     do not move them."""
+    normalize_reward: bool = False
+    """The learner trains on the reward divided by the running standard deviation of each
+    real worker's discounted return (discounted by `gamma`, reset at each episode's end),
+    clipped to +-10 (`REWARD_CLIP` in `ldn_jax.learners.base`), as SB3's VecNormalize does;
+    then times `reward_scale`. The statistics live in the parameters
+    (`params["reward_norm"]`); imagined rewards are divided by them but do not move them."""
     min_std: float = 1e-4
     """Continuous actions: the Gaussian policy's std is softplus(.) + min_std."""
     log_std_init: float | None = None
@@ -170,7 +185,13 @@ class ModelConfig:
     "m2ac": at each imagined step, of the rollouts still running only the `m2ac_keep` share
     the ensemble is most confident about (lowest disagreement, nearest whole count) goes on,
     in the style of M2AC (Pan et al. 2020); needs `ld` "ensemble".
+    "macura": stop where the ensemble's disagreement passes a threshold set afresh each
+    iteration, `macura_scale` times the `macura_quantile` quantile of the disagreement on
+    the first imagined step from the rollouts' start states, in the style of MACURA
+    (Frauenknecht et al. 2024); needs `ld` "ensemble".
     "horizon": every imagined episode is cut after `horizon` steps (MBPO's rollout length).
+    "mbpo": the cut grows with the real steps taken, MBPO's schedule: `horizon_min` steps
+    until `horizon_from` real steps, `horizon_max` from `horizon_to`, linear between.
     "oracle": stop where the true one-step error, ||M1(s, a) - env(s, a)|| on the next
     observation with the real env stepped from the imagined state, exceeds `oracle_error`:
     the ceiling of any estimator (envs whose observation is their state: CartPole).
@@ -179,6 +200,18 @@ class ModelConfig:
     """`stop` "horizon": imagined steps per episode (MBPO's h; h in {1, 5, 25} is the study)."""
     m2ac_keep: float = 0.5
     """`stop` "m2ac": the share of running imagined rollouts kept at each step."""
+    macura_quantile: float = 0.95
+    """`stop` "macura": the quantile of the first step's disagreement the threshold scales."""
+    macura_scale: float = 1.0
+    """`stop` "macura": the threshold is this times that quantile."""
+    horizon_min: int = 1
+    """`stop` "mbpo": the horizon until `horizon_from` real steps."""
+    horizon_max: int = 15
+    """`stop` "mbpo": the horizon from `horizon_to` real steps on."""
+    horizon_from: int = 20_000
+    """`stop` "mbpo": real steps (per run) where the horizon starts to grow."""
+    horizon_to: int = 100_000
+    """`stop` "mbpo": real steps where it reaches `horizon_max`."""
     oracle_error: float = 0.01
     """`stop` "oracle": the largest true one-step error (L2, the observation's units) that
     does not stop; about 3 times the median one-step error of an ldn model on cartpole-v2
@@ -202,6 +235,36 @@ class ModelConfig:
     quota of n_steps x workers imagined steps per iteration, whatever the LD.
     The PPO family uses "memory" (`ldn_jax.presets.LEARNER`)."""
 
+    imagine_start: str = "initial"
+    """Where an imagined rollout starts, one of `IMAGINE_STARTS`.
+    "initial": a fresh initial state of the env (Algorithm 1, line 17; the paper's).
+    "real" (ours, branched in the style of MBPO): a state drawn uniformly from the real
+    buffer R. `branches` rollouts run side by side, each cut after `horizon` steps (stop
+    "mbpo": its scheduled horizon) or sooner by `stop`, as a truncation, and followed at
+    once by another from a fresh draw, until the iteration has imagined `imagined_ratio`
+    steps per real step (whole segments). The learner updates on every n steps of the
+    `branches` rollouts, so every update is a full batch; `imagine` is not read."""
+    branches: int = 64
+    """`imagine_start` "real": the imagined rollouts played side by side."""
+    imagined_ratio: float = 4.0
+    """`imagine_start` "real": imagined steps per real step of the iteration (at least; in
+    whole segments of `branches` x n steps)."""
+    real_share: float = 0.0
+    """`imagine_start` "real": the share of real rows in each update on imagined ones, in
+    [0, 1): beside the `branches` imagined rollouts the learner gets the nearest whole
+    number of n-step windows of this iteration's real play (MBPO mixes in 5%)."""
+    probabilistic: bool = False
+    """Each member of the ensemble (`ld` "ensemble" or "variance") outputs a Gaussian over
+    the standardised next observation and reward, fitted by negative log-likelihood with
+    learned bounds on its log variance (PETS, MBPO); an imagined step samples from one
+    elite member drawn at random. A tenth of the buffer's slots is held out to rank the
+    members (`elites`). False: each member predicts a point, trained by eq. 2's squared
+    error, and imagination steps their mean."""
+    elites: int | None = None
+    """`probabilistic`: the members with the lowest held-out error that imagine (None: all)."""
+    hidden_layers: int = 1
+    """`probabilistic`: hidden layers of each member's net, `hidden` units each (the
+    paper's model is two nets of one hidden layer, kept when not probabilistic)."""
     hidden: int = 200
     """Hidden units of each of the two model nets ((s, a) -> s' and s' -> r)."""
     activation: str = "linear"
@@ -442,7 +505,9 @@ def resolution(preset: str, given: dict[str, tuple[object, str]]) -> list[Layer]
     env, algo = value("env", Config.env), value("algo", Config.algo)
     algorithm = ALGORITHMS.get(algo, ALGORITHMS["ldn"])
     found = [("default", _defaults())]
-    found += presets.layers(preset, env, algorithm.learner, _continuous(env))
+    found += presets.layers(
+        preset, env, algorithm.learner, _continuous(env), model_based=algorithm.uses_model
+    )
     sources: dict[str, dict[str, object]] = {}
     for name, (setting, where) in given.items():
         sources.setdefault(where, {})[name] = setting
@@ -454,8 +519,8 @@ def resolution(preset: str, given: dict[str, tuple[object, str]]) -> list[Layer]
         found.append(("rule: a budget in episodes replaces the steps budget", {"steps": None}))
     stop = merged["model.stop"] or ("ld" if algorithm.ld_stop else "none")
     set_ld = any("model.ld" in values for _, values in found[1:])
-    if stop == "m2ac" and not set_ld:
-        found.append(("rule: stop m2ac ranks by ensemble disagreement", {"model.ld": "ensemble"}))
+    if stop in ENSEMBLE_RULES and not set_ld:
+        found.append((f"rule: stop {stop} reads ensemble disagreement", {"model.ld": "ensemble"}))
     gains = tuple(merged["k"])
     if not (algorithm.uses_model and stop == "ld") and len(gains) > 1:
         found.append((f"rule: {algo} does not use K, the first is kept", {"k": gains[:1]}))
@@ -521,10 +586,18 @@ def sweepable() -> tuple[str, ...]:
     """The fields a sweep can vary (`Config.sweep`): every float field the compiled program
     reads as a number. Not: K (`k` is its own axis), `threshold` (read by the host, after
     training), the initialisers' `init_std` and `log_std_init` (read where the parameters
-    are made; `init_std` shapes the network modules), and every int, bool or str field
+    are made; `init_std` shapes the network modules), the branched imagination's
+    `imagined_ratio` and `real_share` (they size its batches), and every int, bool or str field
     (sizes, counts, choices: they change the program's shapes or code, so they need separate
     runs)."""
-    excluded = {"threshold", "agent.init_std", "model.init_std", "agent.log_std_init"}
+    excluded = {
+        "threshold",
+        "agent.init_std",
+        "model.init_std",
+        "agent.log_std_init",
+        "model.imagined_ratio",
+        "model.real_share",
+    }
     return tuple(
         name
         for name, kind in fields().items()
@@ -690,6 +763,50 @@ def validate(config: Config) -> Config:
         ),
         (config.model.ensemble >= 2, f"ensemble size must be >= 2, got {config.model.ensemble}"),
         (model.horizon >= 1, f"horizon must be >= 1, got {model.horizon}"),
+        (
+            model.imagine_start in IMAGINE_STARTS,
+            f"unknown imagine_start {model.imagine_start!r}; valid: {', '.join(IMAGINE_STARTS)}",
+        ),
+        (model.branches >= 1, f"branches must be >= 1, got {model.branches}"),
+        (
+            model.imagine_start == "initial"
+            or config.algo not in ALGORITHMS
+            or config.algorithm.uses_model,
+            f"imagine_start 'real' branches imagined rollouts, and {config.algo} imagines "
+            "none; use a model-based algorithm (-model or -ldn)",
+        ),
+        (model.imagined_ratio > 0, f"imagined_ratio must be > 0, got {model.imagined_ratio}"),
+        (0 <= model.real_share < 1, f"real_share must be in [0, 1), got {model.real_share}"),
+        (
+            1 <= model.horizon_min <= model.horizon_max,
+            f"the horizon schedule needs 1 <= horizon_min <= horizon_max, got "
+            f"{model.horizon_min} and {model.horizon_max}",
+        ),
+        (
+            0 <= model.horizon_from <= model.horizon_to,
+            f"the horizon schedule needs 0 <= horizon_from <= horizon_to, got "
+            f"{model.horizon_from} and {model.horizon_to}",
+        ),
+        (
+            0 < model.macura_quantile <= 1,
+            f"macura_quantile must be in (0, 1], got {model.macura_quantile}",
+        ),
+        (model.macura_scale > 0, f"macura_scale must be > 0, got {model.macura_scale}"),
+        (model.hidden_layers >= 1, f"model hidden_layers must be >= 1, got {model.hidden_layers}"),
+        (
+            model.elites is None or 1 <= model.elites <= model.ensemble,
+            f"elites must be in [1, ensemble size {model.ensemble}] (or none: all), got "
+            f"{model.elites}",
+        ),
+        (
+            not model.probabilistic or model.ld in ("ensemble", "variance"),
+            "probabilistic models are an ensemble: set ld 'ensemble' or 'variance' (M0 is the "
+            "paper's single linear net's twin)",
+        ),
+        (
+            model.ld != "variance" or model.probabilistic,
+            "ld 'variance' reads the members' predicted variance: it needs model.probabilistic",
+        ),
         (0 < model.m2ac_keep <= 1, f"m2ac_keep must be in (0, 1], got {model.m2ac_keep}"),
         (model.oracle_error > 0, f"oracle_error must be > 0, got {model.oracle_error}"),
         *_stop_checks(config),
@@ -752,8 +869,8 @@ def _stop_checks(config: Config) -> list[tuple[bool, str]]:
             f"use --algo {'ldn' if learner == 'a2c' else 'ppo-ldn'}",
         ),
         (
-            stop != "m2ac" or model.ld == "ensemble",
-            "stop 'm2ac' ranks imagined rollouts by ensemble disagreement: it needs ld "
+            stop not in ENSEMBLE_RULES or model.ld == "ensemble",
+            f"stop {stop!r} reads the disagreement of an ensemble of models: it needs ld "
             "'ensemble' (its default)",
         ),
         (

@@ -2,6 +2,8 @@
 
 With `ModelConfig.ld = "ensemble"` M1 is E models ("members") whose parameters, optimiser
 states and M0 copies are stacked on a leading axis `[E, ...]`; they share the normaliser.
+With `ModelConfig.probabilistic` each member outputs a Gaussian (`GaussianDynamicsModel`),
+fitted by `gaussian_nll`, and the members are ranked on held-out slots of the buffer.
 """
 
 from __future__ import annotations
@@ -11,14 +13,28 @@ import jax.numpy as jnp
 import optax
 from flax import struct
 
-from ldn_jax.buffer import Buffer, Transitions, buffer_sample
+from ldn_jax.buffer import Buffer, Transitions, buffer_sample, buffer_sample_split
 from ldn_jax.config import ModelConfig
-from ldn_jax.networks import DynamicsModel
+from ldn_jax.networks import DynamicsModel, GaussianDynamicsModel
 
 Array = jax.Array
 
 MIN_WIDTH = 1e-3
 """The narrowest box side `buffer_bounds` widens from, and the floor of the normaliser's std."""
+
+BOUND_PENALTY = 0.01
+"""Weight of the penalty sum(max_log_var) - sum(min_log_var) in a probabilistic model's loss
+(PETS' and MBPO's value): it keeps the learned log-variance bounds tight."""
+
+HOLDOUT_BATCH = 1024
+"""Held-out transitions drawn to rank a probabilistic ensemble's members after each fit."""
+
+
+def gaussian_nll(mean: Array, log_var: Array, target: Array) -> Array:
+    """The negative log-likelihood of `target` under N(mean, exp(log_var)) per output,
+    0.5 ((y - mean)^2 exp(-log_var) + log_var + log 2 pi), averaged over every axis."""
+    error = jnp.square(target - mean) * jnp.exp(-log_var)
+    return 0.5 * jnp.mean(error + log_var + jnp.log(2 * jnp.pi))
 
 
 @struct.dataclass
@@ -43,6 +59,10 @@ class ModelState:
     stats: Normalizer
     """Shared by M1 and M0 (and all members); refreshed from the buffer before each fit when
     normalising."""
+    elites: Array | None = None
+    """Probabilistic ensemble only (None otherwise): the indices `[elites]` of the members
+    with the lowest held-out squared error at the last fit, those that imagine; all
+    members until the first fit."""
     error_scale: Array | None = None
     """Ensemble only (None otherwise, so the m0 state and its checkpoints keep their layout):
     the members' mean eq. 2 loss of the last fit, in the model's normalised units; 1 until the
@@ -75,19 +95,36 @@ class Dynamics:
         self.config = config
         self.obs_size = obs_size
         self.action_size = action_size
-        self.net = DynamicsModel(
-            obs_size=obs_size,
-            hidden=config.hidden,
-            activation=config.activation,
-            init_std=config.init_std,
-            predict_delta=config.predict_delta,
-        )
+        if config.probabilistic:
+            self.net = GaussianDynamicsModel(
+                obs_size=obs_size,
+                hidden=config.hidden,
+                activation=config.activation,
+                layers=config.hidden_layers,
+            )
+        else:
+            self.net = DynamicsModel(
+                obs_size=obs_size,
+                hidden=config.hidden,
+                activation=config.activation,
+                init_std=config.init_std,
+                predict_delta=config.predict_delta,
+            )
         self.optimizer = optax.adam(config.lr)
 
     @property
     def ensemble(self) -> bool:
-        """M1 is `config.ensemble` stacked members (`ld = "ensemble"`)."""
-        return self.config.ld == "ensemble"
+        """M1 is `config.ensemble` stacked members (`ld` "ensemble" or "variance")."""
+        return self.config.ld in ("ensemble", "variance")
+
+    @property
+    def probabilistic(self) -> bool:
+        return self.config.probabilistic
+
+    @property
+    def elite_count(self) -> int:
+        """How many members imagine (`ModelConfig.elites`, or all)."""
+        return self.config.elites or self.config.ensemble
 
     def init(self, key: Array) -> ModelState:
         """M1 and M0; ensemble: member i initialised from `jax.random.split(key, E)[i]`."""
@@ -107,6 +144,7 @@ class Dynamics:
             frozen=frozen,
             opt_state=opt_state,
             stats=self.init_stats(),
+            elites=jnp.arange(self.elite_count, dtype=jnp.int32) if self.probabilistic else None,
             error_scale=jnp.ones((), jnp.float32) if self.ensemble else None,
             bounds=self._unbounded() if self.config.support is not None else None,
         )
@@ -114,7 +152,18 @@ class Dynamics:
     def predict_normalized(
         self, params: dict, stats: Normalizer, obs: Array, action: Array
     ) -> tuple[Array, Array]:
-        """The net's own outputs: next obs and reward in normalised units."""
+        """The net's own outputs: next obs and reward in normalised units (a probabilistic
+        model: its mean)."""
+        if self.probabilistic:
+            mean, _ = self.predict_gaussian(params, stats, obs, action)
+            return mean[..., :-1], mean[..., -1]
+        return self.net.apply(params, (obs - stats.obs_mean) / stats.obs_std, action)
+
+    def predict_gaussian(
+        self, params: dict, stats: Normalizer, obs: Array, action: Array
+    ) -> tuple[Array, Array]:
+        """A probabilistic model's mean and log variance over [next obs, reward] in
+        normalised units, each `[..., obs_size + 1]`."""
         return self.net.apply(params, (obs - stats.obs_mean) / stats.obs_std, action)
 
     def predict_members(
@@ -148,18 +197,33 @@ class Dynamics:
 
     def loss(self, params: dict, batch: Transitions, stats: Normalizer | None = None) -> Array:
         """Eq. 2: MSE on the target y = [s', r] (normalised when on), mean over batch and
-        output dims."""
+        output dims. A probabilistic model: `gaussian_nll` of y, plus `BOUND_PENALTY` times
+        the gap between its log-variance bounds."""
         stats = stats if stats is not None else self.init_stats()
+        target = self.target(batch, stats)
+        if self.probabilistic:
+            mean, log_var = self.predict_gaussian(params, stats, batch.obs, batch.action)
+            bounds = params["params"]
+            gap = bounds["max_log_var"].sum() - bounds["min_log_var"].sum()
+            return gaussian_nll(mean, log_var, target) + BOUND_PENALTY * gap
+        return self.squared_error(params, batch, stats)
+
+    def squared_error(self, params: dict, batch: Transitions, stats: Normalizer) -> Array:
+        """Eq. 2's MSE of the (mean) prediction, in normalised units."""
         next_obs, reward = self.predict_normalized(params, stats, batch.obs, batch.action)
         pred = jnp.concatenate([next_obs, reward[..., None]], axis=-1)
-        target = jnp.concatenate(
+        return jnp.mean(jnp.square(pred - self.target(batch, stats)))
+
+    @staticmethod
+    def target(batch: Transitions, stats: Normalizer) -> Array:
+        """y = [s', r] in normalised units, `[..., obs_size + 1]`."""
+        return jnp.concatenate(
             [
                 (batch.next_obs - stats.obs_mean) / stats.obs_std,
                 ((batch.reward - stats.reward_mean) / stats.reward_std)[..., None],
             ],
             axis=-1,
         )
-        return jnp.mean(jnp.square(pred - target))
 
     def _unbounded(self) -> tuple[Array, Array]:
         return jnp.full(self.obs_size, -jnp.inf), jnp.full(self.obs_size, jnp.inf)
@@ -225,8 +289,21 @@ class Dynamics:
         fit = jax.vmap(self._fit_one, (0, 0, None, None, 0))
         params, opt_state, losses = fit(state.params, state.opt_state, state.stats, buffer, keys)
         loss = losses.mean()
+        if self.probabilistic:
+            return self._rank(state.replace(params=params, opt_state=opt_state), buffer, key), loss
         error_scale = loss if self.config.updates else state.error_scale
         return state.replace(params=params, opt_state=opt_state, error_scale=error_scale), loss
+
+    def _rank(self, state: ModelState, buffer: Buffer, key: Array) -> ModelState:
+        """A probabilistic ensemble's elites: the members with the lowest squared error on
+        `HOLDOUT_BATCH` held-out transitions; their mean error is the scale disagreement is
+        read against (`error_scale`)."""
+        held = buffer_sample_split(buffer, jax.random.fold_in(key, 1), HOLDOUT_BATCH, True)
+        errors = jax.vmap(self.squared_error, (0, None, None))(state.params, held, state.stats)
+        elites = jnp.argsort(errors, stable=True)[: self.elite_count].astype(jnp.int32)
+        if not self.config.updates:
+            return state
+        return state.replace(elites=elites, error_scale=errors[elites].mean())
 
     def _fit_one(
         self, params: dict, opt_state: optax.OptState, stats: Normalizer, buffer: Buffer, key: Array
@@ -235,7 +312,10 @@ class Dynamics:
 
         def update(carry, key: Array):
             params, opt_state = carry
-            batch = buffer_sample(buffer, key, self.config.batch_size)
+            if self.probabilistic:  # the held-out slots rank the members
+                batch = buffer_sample_split(buffer, key, self.config.batch_size, False)
+            else:
+                batch = buffer_sample(buffer, key, self.config.batch_size)
             loss, grads = jax.value_and_grad(self.loss)(params, batch, stats)
             updates, opt_state = self.optimizer.update(grads, opt_state, params)
             return (optax.apply_updates(params, updates), opt_state), loss

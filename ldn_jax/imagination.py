@@ -7,7 +7,10 @@ truncation: the critic bootstraps, since the episode itself had not ended. A fix
 is the episode's step limit (`imagined_steps_limit`).
 
 With an ensemble (`ModelConfig.ld = "ensemble"`) the world steps the members' mean prediction
-and the LD comes from their disagreement instead of from M1 vs M0.
+and the LD comes from their disagreement instead of from M1 vs M0. A probabilistic ensemble
+(`ModelConfig.probabilistic`) steps a sample of one elite member drawn at random per rollout
+and step; its LD reads the disagreement of the elites' means ("ensemble") or the drawn
+member's own predicted variance ("variance").
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from flax import struct
 from ldn_jax.config import LD_ESTIMATORS, STOP_RULES, ModelConfig
 from ldn_jax.dynamics import Dynamics, ModelState
 from ldn_jax.learning_degree import (
+    REDUCE,
     deviation,
     disagreement,
     ensemble_learning_degree,
@@ -68,7 +72,8 @@ def model_world(
 
     def step(key: Array, world: Array | None, obs: Array, action: Array, alive: Array):
         encoded = model_action(action)
-        predicted, statistic = estimate(dynamics, model, obs, encoded)
+        k_model = jax.random.fold_in(key, MODEL_STREAM)  # the stop rule draws from `key`
+        predicted, statistic = estimate(dynamics, model, obs, encoded, k_model)
         statistic, world = windowed(scale * statistic, world)
         ld, p_stop = degree(statistic, gain)
         next_obs, reward = dynamics.denormalize(model.stats, *predicted)
@@ -104,19 +109,33 @@ class StepView:
     """Which workers' imagined episodes are still running (bool)."""
 
 
+MODEL_STREAM = 0x5EED
+"""`jax.random.fold_in` data of a probabilistic model's draws (which member, which sample)
+in each imagined step: a branch off the step's key, which the stopping rule draws from."""
+
 StopRule = Callable[[Array, StepView], Array]
 """`(key, step) -> stop [W]` bool: end the episode after this step (a truncation)."""
 
 
-def stop_rule(config: ModelConfig, name: str, true_next: Callable | None = None) -> StopRule:
+def stop_rule(
+    config: ModelConfig,
+    name: str,
+    true_next: Callable | None = None,
+    threshold: Array | None = None,
+) -> StopRule:
     """The rule `name` (one of `STOP_RULES`) with `config`'s parameters. `true_next(key,
     obs, action) -> next_obs`: the real env stepped from imagined observations, needed
-    by "oracle" only. "horizon" stops nothing here: its cut is the episode's step limit
-    (`imagined_steps_limit`)."""
+    by "oracle" only; `threshold`: "macura"'s (`macura_threshold`). "horizon" and "mbpo"
+    stop nothing here: their cut is the episode's step limit (`imagined_steps_limit`,
+    `scheduled_horizon`)."""
     if name == "ld":
         return lambda key, step: stop_draw(key, step.p_stop)
-    if name in ("none", "horizon"):
+    if name in ("none", "horizon", "mbpo"):
         return lambda key, step: jnp.zeros(step.alive.shape, bool)
+    if name == "macura":
+        if threshold is None:
+            raise ValueError("the macura stop needs its threshold (macura_threshold)")
+        return lambda key, step: step.statistic > threshold
     if name == "m2ac":
         keep = config.m2ac_keep
         return lambda key, step: step.alive & ~m2ac_kept(step.statistic, step.alive, keep)
@@ -144,6 +163,31 @@ def m2ac_kept(score: Array, alive: Array, keep: Array | float) -> Array:
     return alive & (ranks < count)
 
 
+def macura_threshold(first: Array, quantile: Array | float, scale: Array | float) -> Array:
+    """MACURA's adaptive cut: `scale` times the `quantile` quantile of the disagreement `[N]`
+    of the first imagined step from N start states (linear interpolation between order
+    statistics). Its reading here: recomputed each iteration from that iteration's starts."""
+    return scale * jnp.quantile(first, quantile)
+
+
+def first_step_statistic(
+    dynamics: Dynamics, model: ModelState, obs: Array, action: Array, key: Array
+) -> Array:
+    """The estimator's deviation `[N]` of one step from `obs [N, d]` with the encoded
+    `action`, scaled by `ld_scale` (a window's first step is the step itself)."""
+    _, statistic = LD_ESTIMATES[dynamics.config.ld][0](dynamics, model, obs, action, key)
+    return dynamics.config.ld_scale * statistic
+
+
+def scheduled_horizon(config: ModelConfig, env_steps: Array) -> Array:
+    """MBPO's rollout length after `env_steps` real steps: `horizon_min` until
+    `horizon_from`, `horizon_max` from `horizon_to`, linear between, rounded down; int32."""
+    span = max(config.horizon_to - config.horizon_from, 1)
+    progress = jnp.clip((env_steps - config.horizon_from) / span, 0.0, 1.0)
+    grown = config.horizon_min + progress * (config.horizon_max - config.horizon_min)
+    return jnp.floor(grown).astype(jnp.int32)
+
+
 def oracle_error(predicted: Array, truth: Array) -> Array:
     """The one-step error the oracle reads: ||predicted - truth|| over the observation,
     `[..., D] x2 -> [...]` (the calibration's `one_step_error`)."""
@@ -163,8 +207,9 @@ def ld_history(dynamics: Dynamics, workers: int) -> Array | None:
     return None if window == 1 else jnp.zeros((workers, window - 1), jnp.float32)
 
 
-def _m0_estimate(dynamics: Dynamics, model: ModelState, obs: Array, action: Array):
+def _m0_estimate(dynamics: Dynamics, model: ModelState, obs: Array, action: Array, key: Array):
     """M1's normalised prediction, and eq. 3's sigma2 of M1 vs M0."""
+    del key  # deterministic
     m1 = dynamics.predict_normalized(model.params, model.stats, obs, action)
     m0 = dynamics.predict_normalized(model.frozen, model.stats, obs, action)
     return m1, deviation(_joined(*m1), _joined(*m0), dynamics.config.ld_reduce)
@@ -175,9 +220,13 @@ def _m0_degree(sigma2: Array, gain: Array):
     return learning_degree(sigma2, gain), stop_probability(sigma2, gain)
 
 
-def _ensemble_estimate(dynamics: Dynamics, model: ModelState, obs: Array, action: Array):
+def _ensemble_estimate(
+    dynamics: Dynamics, model: ModelState, obs: Array, action: Array, key: Array
+):
     """The members' mean normalised prediction, and their disagreement relative to their
-    fit error."""
+    fit error (a probabilistic ensemble: `_gaussian_estimate`)."""
+    if dynamics.probabilistic:
+        return _gaussian_estimate(dynamics, model, obs, action, key, "ensemble")
     members = _joined(*dynamics.predict_members(model.params, model.stats, obs, action))
     mean = ensemble_mean(members)
     d = disagreement(members, dynamics.config.ld_reduce)
@@ -189,15 +238,45 @@ def _ensemble_degree(d_rel: Array, gain: Array):
     return ensemble_learning_degree(d_rel, gain), ensemble_stop_probability(d_rel, gain)
 
 
+def _gaussian_estimate(
+    dynamics: Dynamics, model: ModelState, obs: Array, action: Array, key: Array, reading: str
+):
+    """A probabilistic ensemble's step: a sample of one elite drawn per row, and either the
+    elites' disagreement on their means ("ensemble") or the drawn member's mean predicted
+    variance, halved as eq. 3 halves ("variance"), relative to the held-out error."""
+    mean, log_var = jax.vmap(dynamics.predict_gaussian, (0, None, None, None))(
+        model.params, model.stats, obs, action
+    )  # [E, N, D + 1]
+    k_member, k_noise = jax.random.split(key)
+    pick = jax.random.randint(k_member, obs.shape[:-1], 0, model.elites.shape[0])
+    member = model.elites[pick]  # [N]
+    chosen = lambda x: jnp.take_along_axis(x, member[None, :, None], axis=0)[0]
+    centre, chosen_log_var = chosen(mean), chosen(log_var)
+    sample = centre + jnp.exp(0.5 * chosen_log_var) * jax.random.normal(k_noise, centre.shape)
+    reduce = dynamics.config.ld_reduce
+    if reading == "variance":
+        d = 0.5 * REDUCE[reduce](jnp.exp(chosen_log_var), axis=-1)
+    else:
+        d = disagreement(mean[model.elites], reduce)
+    return (sample[..., :-1], sample[..., -1]), relative_disagreement(d, model.error_scale)
+
+
+def _variance_estimate(
+    dynamics: Dynamics, model: ModelState, obs: Array, action: Array, key: Array
+):
+    return _gaussian_estimate(dynamics, model, obs, action, key, "variance")
+
+
 LD_ESTIMATES = {
     "m0": (_m0_estimate, _m0_degree),
     "ensemble": (_ensemble_estimate, _ensemble_degree),
+    "variance": (_variance_estimate, _ensemble_degree),
 }
-"""`ModelConfig.ld` -> `(estimate, degree)`: `estimate(dynamics, model, obs, action) ->
-(prediction, deviation)` and `degree(deviation, gain) -> (LD, P(stop))`, the deviation
-scaled and windowed between them (`model_world`): the learning-degree estimators, as
-`LEARNERS` holds the learners. A new estimator is a pair here and its name in
-`ldn_jax.config.LD_ESTIMATORS`."""
+"""`ModelConfig.ld` -> `(estimate, degree)`: `estimate(dynamics, model, obs, action, key) ->
+(prediction, deviation)` (`key`: a probabilistic model's draws) and `degree(deviation,
+gain) -> (LD, P(stop))`, the deviation scaled and windowed between them (`model_world`):
+the learning-degree estimators, as `LEARNERS` holds the learners. A new estimator is a pair
+here and its name in `ldn_jax.config.LD_ESTIMATORS`."""
 assert tuple(LD_ESTIMATES) == LD_ESTIMATORS, "estimators and their config names disagree"
 
 

@@ -15,6 +15,7 @@ ACTIVATIONS: dict[str, Callable[[Array], Array]] = {
     "relu": nn.relu,
     "relu6": nn.relu6,
     "tanh": nn.tanh,
+    "swish": nn.swish,
 }
 
 
@@ -118,3 +119,43 @@ class DynamicsModel(nn.Module):
             next_obs = obs + next_obs
         reward = mlp(1)(next_obs)[..., 0]
         return next_obs, reward
+
+
+MAX_LOG_VAR = 0.5
+"""Where a probabilistic model's upper log-variance bound starts (standardised units)."""
+
+MIN_LOG_VAR = -10.0
+"""Where its lower bound starts."""
+
+
+class GaussianDynamicsModel(nn.Module):
+    """A probabilistic model (PETS, MBPO): (s, a) -> a diagonal Gaussian over [s', r].
+
+    One net of `layers` hidden layers predicts the mean of s' - s and of r, and their log
+    variance, which is held softly between two learned bounds (`max_log_var`,
+    `min_log_var`: parameters, pulled towards each other by the loss's penalty). Weights
+    start from flax's default (LeCun normal) initialiser.
+    """
+
+    obs_size: int
+    hidden: int
+    activation: str
+    layers: int
+
+    @nn.compact
+    def __call__(self, obs: Array, action: Array) -> tuple[Array, Array]:
+        """obs `[..., D]`, action `[..., A]` -> (mean, log variance), each `[..., D + 1]`: the
+        next observation's (s plus the predicted change) then the reward's."""
+        size = self.obs_size + 1
+        dense = lambda out: nn.Dense(out, dot_general=dense_dot_general)
+        x = jnp.concatenate([obs, action], axis=-1)
+        for _ in range(self.layers):
+            x = ACTIVATIONS[self.activation](dense(self.hidden)(x))
+        out = dense(2 * size)(x)
+        mean, log_var = out[..., :size], out[..., size:]
+        upper = self.param("max_log_var", nn.initializers.constant(MAX_LOG_VAR), (size,))
+        lower = self.param("min_log_var", nn.initializers.constant(MIN_LOG_VAR), (size,))
+        log_var = upper - nn.softplus(upper - log_var)
+        log_var = lower + nn.softplus(log_var - lower)
+        mean = jnp.concatenate([obs + mean[..., :-1], mean[..., -1:]], axis=-1)
+        return mean, log_var

@@ -138,8 +138,12 @@ def own_fields(entry: dict) -> dict[str, object]:
     return {name: value for name, value in entry.items() if name not in ("learners", "envs")}
 
 
-def layers(preset: str, env: str, learner: str, continuous: bool) -> list[Layer]:
-    """The layers of steps 2-5 for one run, lowest first (empty ones left out)."""
+def layers(
+    preset: str, env: str, learner: str, continuous: bool, model_based: bool = True
+) -> list[Layer]:
+    """The layers of steps 2-5 for one run, lowest first (empty ones left out). A preset's
+    model fields apply to model-based algorithms only (`model_based`), so that its
+    model-free learner runs with the same constants beside them."""
     task = TASKS.get(env, {})
     found: list[Layer] = [
         (f"learner {learner}", LEARNER[learner]),
@@ -152,4 +156,12 @@ def layers(preset: str, env: str, learner: str, continuous: bool) -> list[Layer]
         (f"preset {preset}, {learner}", PRESETS[preset].get("learners", {}).get(learner, {})),
         (f"preset {preset}, {env}", PRESETS[preset].get("envs", {}).get(env, {})),
     ]
+    if not model_based:
+        model_free = lambda layer, name: (
+            not (layer.startswith("preset") and name.startswith("model."))
+        )
+        found = [
+            (layer, {n: v for n, v in vals.items() if model_free(layer, n)})
+            for layer, vals in found
+        ]
     return [(name, values) for name, values in found if values]

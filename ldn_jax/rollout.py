@@ -55,8 +55,15 @@ class Player:
     act throughout and are returned unchanged; `losses` is empty), for a learner that
     learns from the whole batch later."""
     observe: bool = False
-    """Real episodes: each segment's observations go into the learner's running observation
-    statistics (`AgentConfig.normalize_obs`) before it learns from it."""
+    """Real episodes: each segment goes into the learner's running statistics of observations
+    and returns (`AgentConfig.normalize_obs`, `normalize_reward`) before it learns from it."""
+    horizon: Any = None
+    """A cut below `max_steps` that may be a traced int (MBPO's schedule): an episode still
+    running after this many steps is truncated; None: `max_steps` alone."""
+    mix: Callable[[Array, Segment], Segment] | None = None
+    """`mix(key, segment) -> segment`: what the learner learns from instead of each played
+    segment `[n, W]` (branched imagination adds real rows beside the imagined ones); the
+    played segment is still what the batch returns."""
 
 
 @struct.dataclass
@@ -122,7 +129,7 @@ def _segment_fn(
     """`(carry, key) -> (carry, (transitions, extras, losses))`: n steps of every worker,
     then the learner's update; with `reset`, a worker whose episode ends starts the next."""
     learner, world_step, max_steps = player.learner, player.world_step, player.max_steps
-    learn, observe = player.learn, player.observe
+    learn, observe, horizon, mix = player.learn, player.observe, player.horizon, player.mix
     n_steps = learner.config.n_steps
 
     def step(carry: EpisodeCarry, key: Array):
@@ -133,7 +140,10 @@ def _segment_fn(
         next_obs, world, reward, terminated, truncated, extras = world_step(
             k_world, carry.world, carry.obs, learner.env_action(action), carry.alive
         )
-        truncated = (truncated | (carry.time + 1 >= max_steps)) & ~terminated
+        limit = carry.time + 1 >= max_steps
+        if horizon is not None:
+            limit = limit | (carry.time + 1 >= horizon)
+        truncated = (truncated | limit) & ~terminated
         done = terminated | truncated
         transition = Segment(
             obs=carry.obs,
@@ -172,12 +182,14 @@ def _segment_fn(
         k_steps, k_update = jax.random.split(key)
         carry, (transitions, extras) = jax.lax.scan(step, carry, jax.random.split(k_steps, n_steps))
         if observe:
-            carry = carry.replace(
-                learner=learner.observe(carry.learner, transitions.obs, transitions.weight)
-            )
+            carry = carry.replace(learner=learner.observe(carry.learner, transitions))
         if not learn:
             return carry, (transitions, extras, {})
-        learner_state, losses = learner.update(carry.learner, transitions, k_update)
+        learned = transitions
+        if mix is not None:
+            k_update, k_mix = jax.random.split(k_update)
+            learned = mix(k_mix, transitions)
+        learner_state, losses = learner.update(carry.learner, learned, k_update)
         return carry.replace(learner=learner_state), (transitions, extras, losses)
 
     return segment
@@ -202,6 +214,7 @@ def play_batch(
     reset: Reset,
     quota: Array | None = None,
     segments: int | None = None,
+    rows: Array | None = None,
 ) -> tuple[LearnerState, Episodes]:
     """Episodes back to back on each of W workers: the first from `obs` and `world`, each
     next one from `reset` as soon as one ends, so every row of the batch is live. Segments
@@ -212,11 +225,14 @@ def play_batch(
     `quota` (`[W]` int): worker w plays `quota[w]` episodes one after the other (none: all
     its rows weight 0), then idles masked; at most `segments` segments (default: one
     episode's, `max_steps` rounded up), where the episode still running is cut.
+    `rows` (may be traced): instead of until every worker has ended an episode, segments
+    are played until at least this many rows (n x W per segment) have been, at most
+    `segments` (branched imagination's quota of imagined steps).
     """
-    return _play(key, learner_state, player, obs, world, reset, quota, segments)
+    return _play(key, learner_state, player, obs, world, reset, quota, segments, rows)
 
 
-def _play(key, learner_state, player, obs, world, reset, quota, segments):
+def _play(key, learner_state, player, obs, world, reset, quota, segments, rows=None):
     """`play_episodes` (no `reset`) and `play_batch`."""
     learner, max_steps = player.learner, player.max_steps
     n_steps = learner.config.n_steps
@@ -243,6 +259,8 @@ def _play(key, learner_state, player, obs, world, reset, quota, segments):
 
     def cond(loop):
         index, carry, _ = loop
+        if rows is not None:
+            return (index < n_segments) & (index * n_steps * workers < rows)
         return (index < n_segments) & ~carry.finished.all()
 
     def body(loop):

@@ -5,7 +5,9 @@ One iteration, per seed and K:
    (schedule "episodes"; under "steps" each plays `iteration_steps` steps instead, its
    episodes carrying over between iterations).
 2. `model_stage`: M1 takes `model.updates` minibatch steps on the real buffer.
-3. `imagine_stage`: each worker plays one episode in M1 from a fresh initial state.
+3. `imagine_stage`: each worker plays one episode in M1 from a fresh initial state; or, with
+   `model.imagine_start = "real"` (ours), `branch_stage`: many short rollouts in M1 from
+   states of the real buffer, the learner updating on full batches of them.
 `a2c` runs stage 1 only; `a2c-model` runs all three without the LD stop; `ldn` with it.
 The PPO family (`ppo`, `ppo-model`, `ppo-ldn`) is the same with PPO as the learner.
 """
@@ -13,6 +15,7 @@ The PPO family (`ppo`, `ppo-model`, `ppo-ldn`) is the same with PPO as the learn
 from __future__ import annotations
 
 import copy
+import math
 
 import jax
 import jax.numpy as jnp
@@ -23,9 +26,17 @@ from ldn_jax import envs
 from ldn_jax.buffer import Buffer, Transitions, buffer_add, buffer_init
 from ldn_jax.config import Config, with_values
 from ldn_jax.dynamics import Dynamics, ModelState, action_encoder
-from ldn_jax.imagination import imagined_steps_limit, ld_history, model_world, stop_rule
+from ldn_jax.imagination import (
+    first_step_statistic,
+    imagined_steps_limit,
+    ld_history,
+    macura_threshold,
+    model_world,
+    scheduled_horizon,
+    stop_rule,
+)
 from ldn_jax.learners import LEARNERS
-from ldn_jax.learners.base import LearnerState
+from ldn_jax.learners.base import LearnerState, Segment
 from ldn_jax.learners.ppo import Memory
 from ldn_jax.learning_degree import ld_histogram
 from ldn_jax.prng import written_out
@@ -121,7 +132,7 @@ class Trainer:
         self.action_spec = self.env.action_spec(self.env_params)
         self.max_steps = self.env_params.max_steps
         learner = LEARNERS[config.algorithm.learner]
-        self.learner = learner(config.agent, self.obs_size, self.action_spec)
+        self.learner = learner(config.agent, self.obs_size, self.action_spec, config.workers)
         self.model_action, self.model_action_size = action_encoder(
             config.model.action_encoding, self.learner.policy, self.action_spec
         )
@@ -140,7 +151,9 @@ class Trainer:
         other = copy.copy(self)
         other.config = with_values(self.config, values)
         learner = LEARNERS[other.config.algorithm.learner]
-        other.learner = learner(other.config.agent, self.obs_size, self.action_spec)
+        other.learner = learner(
+            other.config.agent, self.obs_size, self.action_spec, self.config.workers
+        )
         if self.dynamics is not None:
             other.dynamics = Dynamics(other.config.model, self.obs_size, self.model_action_size)
         return other
@@ -155,7 +168,7 @@ class Trainer:
             buffer = buffer_init(
                 self.config.model.buffer_capacity, self.obs_size, self.model_action_size
             )
-            if self.config.model.imagine == "memory":
+            if self.config.model.imagine == "memory" and not self.branched:
                 memory = self.learner.memory_init(self.config.workers)
         workers = None
         if self.config.schedule == "steps":  # a key of its own: the other draws stay as they are
@@ -177,6 +190,11 @@ class Trainer:
             failed_iteration=zero,
             greedy_return=None if self.config.solved_return is None else jnp.float32(jnp.nan),
         )
+
+    @property
+    def branched(self) -> bool:
+        """Imagined rollouts branch from real states (`ModelConfig.imagine_start`)."""
+        return self.config.model.imagine_start == "real"
 
     # -- stages ----------------------------------------------------------------------------
 
@@ -274,6 +292,103 @@ class Trainer:
             )
             state, episodes = state.replace(memory=state_memory), episodes.replace(losses=losses)
         return state.replace(learner=learner), episodes
+
+    def branch_stage(
+        self, state: TrainState, key: Array, gain: Array, real: Episodes
+    ) -> tuple[TrainState, Episodes]:
+        """Branched imagination (`ModelConfig.imagine_start` "real"): `branches` rollouts in
+        M1 side by side, each from a state drawn from the real buffer and cut after the
+        horizon (or sooner by the stop rule), the next one drawn as one ends, until the
+        iteration has imagined `imagined_ratio` steps per real step it played; the learner
+        updates on every n steps of them (with `real_share` of real rows beside)."""
+        config = self.config.model
+        k_start, k_play, k_first = jax.random.split(key, 3)
+        history = ld_history(self.dynamics, config.branches)
+        buffer = state.buffer
+
+        def draw(key: Array) -> Array:
+            index = jax.random.randint(key, (config.branches,), 0, jnp.maximum(buffer.size, 1))
+            return buffer.data.obs[index]
+
+        obs = draw(k_start)
+        rule = self.config.stop_rule
+        threshold = None
+        if rule == "macura":  # from the first step of this iteration's starts
+            k_act, k_model = jax.random.split(k_first)
+            action = self.learner.env_action(self.learner.act(state.learner.params, k_act, obs))
+            first = first_step_statistic(
+                self.dynamics, state.model, obs, self.model_action(action), k_model
+            )
+            threshold = macura_threshold(first, config.macura_quantile, config.macura_scale)
+        world = model_world(
+            self.dynamics,
+            state.model,
+            lambda o: self.env.is_terminal(o, self.env_params),
+            self.model_action,
+            self._env_reward(),
+            gain,
+            stop_rule(config, rule, self._true_next if rule == "oracle" else None, threshold),
+        )
+        played = real.lengths.sum()
+        horizon = config.horizon
+        if rule == "mbpo":
+            horizon = scheduled_horizon(config, state.env_steps + played)
+        player = Player(
+            self.learner,
+            world,
+            self.max_steps,
+            horizon=horizon,
+            mix=self._real_rows(real.steps, real.lengths),
+        )
+        rows = jnp.ceil(config.imagined_ratio * played)
+        learner, episodes = play_batch(
+            k_play,
+            state.learner,
+            player,
+            obs,
+            history,
+            lambda key: (draw(key), history),
+            segments=self.branch_segments,
+            rows=rows,
+        )
+        return state.replace(learner=learner), episodes
+
+    @property
+    def branch_segments(self) -> int:
+        """The most segments a branched stage plays: enough for `imagined_ratio` imagined
+        steps per real step of the longest possible iteration."""
+        config, n = self.config, self.config.agent.n_steps
+        per_worker = config.steps_per_iteration if config.schedule == "steps" else self.max_steps
+        real = per_worker * config.workers
+        return max(1, math.ceil(config.model.imagined_ratio * real / (config.model.branches * n)))
+
+    def _real_rows(self, steps: Segment, lengths: Array):
+        """`Player.mix` for `real_share`: beside the `branches` imagined rollouts of each
+        segment, R = round(branches x share / (1 - share)) windows of n real steps of this
+        iteration (a worker and a start within its played steps, drawn at random); None for
+        a share of 0."""
+        config = self.config.model
+        share = config.real_share
+        count = round(config.branches * share / (1 - share))
+        if count == 0:
+            return None
+
+        def mix(key: Array, segment: Segment) -> Segment:
+            n = segment.weight.shape[0]
+            k_worker, k_start = jax.random.split(key)
+            worker = jax.random.randint(k_worker, (count,), 0, lengths.shape[0])
+            room = jnp.maximum(lengths[worker] - n, 0) + 1
+            start = (jax.random.uniform(k_start, (count,)) * room).astype(jnp.int32)
+            start = jnp.minimum(start, steps.weight.shape[0] - n)
+
+            def window(x: Array) -> Array:
+                one = lambda w, t: jax.lax.dynamic_slice_in_dim(x[:, w], t, n, 0)
+                return jax.vmap(one, out_axes=1)(worker, start)
+
+            real = jax.tree.map(window, steps)
+            return jax.tree.map(lambda a, b: jnp.concatenate([a, b], axis=1), segment, real)
+
+        return mix
 
     def _true_next(self, key: Array, obs: Array, action: Array) -> Array:
         """The real env's next observations from imagined ones, `[W, d]` (the oracle stop)."""
@@ -396,7 +511,10 @@ class Trainer:
             quota = None
             if self.config.schedule == "steps" and self.config.model.imagine != "batch":
                 quota = completed.ended.sum(axis=0)
-            state, imagined = self.imagine_stage(state, k_imagine, gain, quota)
+            if self.branched:
+                state, imagined = self.branch_stage(state, k_imagine, gain, real)
+            else:
+                state, imagined = self.imagine_stage(state, k_imagine, gain, quota)
             weight = imagined.steps.weight
             imagined_steps = weight.sum().astype(jnp.int32)
             ld = imagined.extras["ld"]

@@ -7,7 +7,14 @@ import pytest
 
 from ldn_jax.config import AgentConfig, from_preset, validate
 from ldn_jax.learners import A2C, PPO
-from ldn_jax.learners.base import OBS_CLIP, Gaussian, Segment, merge_moments, training_reward
+from ldn_jax.learners.base import (
+    OBS_CLIP,
+    REWARD_CLIP,
+    Gaussian,
+    Segment,
+    merge_moments,
+    training_reward,
+)
 
 
 class Box:
@@ -116,7 +123,9 @@ def test_observation_statistics_standardise_inputs_and_no_gradient_moves_them(le
     learner = learner_cls(agent, obs_size=2, action_spec=Box((-1.0,), (1.0,)))
     state = learner.init(jax.random.key(0))
     obs = jnp.array([[[10.0, -4.0]], [[30.0, -4.0]], [[1e6, 1e6]]])  # [n=3, W=1, 2]
-    state = learner.observe(state, obs, jnp.array([[1.0], [1.0], [0.0]]))
+    weight = jnp.array([[1.0], [1.0], [0.0]])
+    segment = Segment(obs, jnp.zeros((3, 1, 1)), jnp.zeros((3, 1)), obs, *[weight == 2] * 2, weight)
+    state = learner.observe(state, segment)
     stats = state.params["obs_norm"]
     np.testing.assert_allclose(np.asarray(stats["mean"]), [20.0, -4.0])
     np.testing.assert_allclose(np.asarray(stats["var"]), [100.0, 0.0])
@@ -139,6 +148,53 @@ def test_observation_statistics_standardise_inputs_and_no_gradient_moves_them(le
         np.asarray(state.params["actor"]["params"]["Dense_0"]["kernel"]),
     )
     assert "obs_norm" not in plain.init(jax.random.key(0)).params
+
+
+@pytest.mark.parametrize("learner_cls", [A2C, PPO])
+def test_reward_statistics_follow_each_workers_discounted_return_across_segments(learner_cls):
+    agent = AgentConfig(normalize_reward=True, gamma=0.5, reward_scale=2.0)
+    learner = learner_cls(agent, obs_size=2, action_spec=Box((-1.0,), (1.0,)), workers=2)
+    state = learner.init(jax.random.key(0))
+    rng = np.random.default_rng(0)
+    reward = rng.normal(size=(6, 2)).astype(np.float32)
+    done = np.zeros((6, 2), bool)
+    done[2, 0] = True  # worker 0's episode ends at step 2 of the first segment
+    weight = np.ones((6, 2), np.float32)
+    weight[4, 1] = 0.0  # a masked row moves nothing
+    reward[4, 1] = np.nan
+    expected, running = [], np.zeros(2)
+    for t in range(6):
+        for w in range(2):
+            if weight[t, w]:
+                running[w] = 0.5 * running[w] + reward[t, w]
+                expected.append(running[w])
+                running[w] = 0.0 if done[t, w] else running[w]
+    base = _bandit_segment(jax.random.key(1), n=3, workers=2)
+    for rows in (slice(0, 3), slice(3, 6)):  # two segments: the returns carry over
+        segment = base.replace(
+            reward=jnp.asarray(reward[rows]),
+            done=jnp.asarray(done[rows]),
+            weight=jnp.asarray(weight[rows]),
+        )
+        state = learner.observe(state, segment)
+    stats = state.params["reward_norm"]
+    np.testing.assert_allclose(np.asarray(stats["return"]), running, rtol=1e-5)
+    np.testing.assert_allclose(float(stats["var"][0]), np.var(expected), rtol=1e-4)
+    assert float(stats["count"]) == len(expected)
+    trained = learner.training_reward(state.params, base)
+    std = np.sqrt(np.var(expected) + 1e-8)
+    want = 2.0 * np.clip(np.asarray(base.reward) / std, -REWARD_CLIP, REWARD_CLIP)
+    np.testing.assert_allclose(np.asarray(trained), want, rtol=1e-5)
+    # No gradient moves the statistics.
+    new, _ = jax.jit(learner.update)(state, base, jax.random.key(2))
+    for a, b in zip(
+        jax.tree.leaves(new.params["reward_norm"]), jax.tree.leaves(stats), strict=True
+    ):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    assert (
+        "reward_norm"
+        not in learner_cls(AgentConfig(), 2, Box((-1.0,), (1.0,))).init(jax.random.key(0)).params
+    )
 
 
 def test_reward_scale_multiplies_the_training_reward_after_the_terminal_one():

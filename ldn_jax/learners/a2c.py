@@ -17,7 +17,6 @@ from ldn_jax.learners.base import (
     Segment,
     canonical,
     keep_if_any,
-    training_reward,
     worker_mean,
 )
 
@@ -48,8 +47,8 @@ def n_step_targets(
 class A2C(ActorCritic):
     """One RMSProp step per segment on the n-step actor-critic loss."""
 
-    def __init__(self, config: AgentConfig, obs_size: int, action_spec):
-        super().__init__(config, obs_size, action_spec)
+    def __init__(self, config: AgentConfig, obs_size: int, action_spec, workers: int = 1):
+        super().__init__(config, obs_size, action_spec, workers)
         # Hyperparameters injected into the optimiser state are arrays, so a learning rate
         # can differ between vmapped runs.
         rmsprop = lambda lr: optax.inject_hyperparams(optax.rmsprop)(
@@ -66,7 +65,11 @@ class A2C(ActorCritic):
         weight = segment.weight
         next_value = jax.lax.stop_gradient(self.value(params, segment.next_obs))
         targets = n_step_targets(
-            training_reward(segment, cfg), next_value, segment.terminated, segment.done, cfg.gamma
+            self.training_reward(params, segment),
+            next_value,
+            segment.terminated,
+            segment.done,
+            cfg.gamma,
         )
         advantage = targets - self.value(params, segment.obs)
         log_prob, entropy = self.log_prob_entropy(params, segment.obs, segment.action)

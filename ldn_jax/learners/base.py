@@ -15,6 +15,9 @@ Array = jax.Array
 OBS_CLIP = 10.0
 """Standardised observations are clipped to this many standard deviations (SB3's default)."""
 
+REWARD_CLIP = 10.0
+"""Normalised rewards (`AgentConfig.normalize_reward`) are clipped to +-this (SB3's default)."""
+
 
 @struct.dataclass
 class Segment:
@@ -234,10 +237,12 @@ class ActorCritic:
 
     optimizer: object
 
-    def __init__(self, config: AgentConfig, obs_size: int, action_spec):
-        """`action_spec`: an env's `ActionSpec`, or the number of discrete actions."""
+    def __init__(self, config: AgentConfig, obs_size: int, action_spec, workers: int = 1):
+        """`action_spec`: an env's `ActionSpec`, or the number of discrete actions; `workers`:
+        how many real workers play (the running returns of `normalize_reward`)."""
         self.config = config
         self.obs_size = obs_size
+        self.workers = workers
         log_std = config.log_std_init is not None
         self.policy = make_policy(action_spec, config.min_std, log_std)
         mlp = lambda hidden, out: MLP(
@@ -262,26 +267,59 @@ class ActorCritic:
                 "var": jnp.ones((self.obs_size,)),
                 "count": jnp.zeros(()),
             }
+        if self.config.normalize_reward:
+            params["reward_norm"] = {
+                "return": jnp.zeros((self.workers,)),
+                "mean": jnp.zeros((1,)),
+                "var": jnp.ones((1,)),
+                "count": jnp.zeros(()),
+            }
         return LearnerState(params=params, opt_state=self.optimizer.init(params))
 
     def per_net(self, actor, critic) -> optax.GradientTransformation:
         """One optimiser for the actor's parameters (its log std too) and one for the
-        critic's; the observation statistics of `normalize_obs`, which no gradient moves, get
-        none."""
+        critic's; the statistics of `normalize_obs` and `normalize_reward`, which no gradient
+        moves, get none."""
         transforms = {"actor": actor, "critic": critic}
-        if self.config.normalize_obs:
+        if self.config.normalize_obs or self.config.normalize_reward:
             transforms["fixed"] = optax.set_to_zero()
         owner = {"actor": "actor", "log_std": "actor", "critic": "critic"}
         labels = lambda params: {n: owner.get(n, "fixed") for n in params}
         return optax.multi_transform(transforms, labels)
 
-    def observe(self, state: LearnerState, obs: Array, weight: Array) -> LearnerState:
-        """Fold real observations `[..., d]` (rows of weight 0 ignored) into the running
-        statistics of `normalize_obs`; without it, `state` as it is."""
-        if "obs_norm" not in state.params:
-            return state
-        stats = merge_moments(state.params["obs_norm"], obs, weight)
-        return state.replace(params={**state.params, "obs_norm": stats})
+    def observe(self, state: LearnerState, segment: Segment) -> LearnerState:
+        """Fold a real segment `[n, W, ...]` (rows of weight 0 ignored) into the running
+        statistics of `normalize_obs` (its observations) and `normalize_reward` (each
+        worker's discounted return after each step); without them, `state` as it is."""
+        params = dict(state.params)
+        if "obs_norm" in params:
+            params["obs_norm"] = merge_moments(params["obs_norm"], segment.obs, segment.weight)
+        if "reward_norm" in params:
+            stats = params["reward_norm"]
+            gamma = self.config.gamma
+
+            def discount(running, step):
+                reward, done, weight = step
+                live = weight > 0
+                running = jnp.where(live, running * gamma + jnp.where(live, reward, 0.0), running)
+                return jnp.where(live & done, 0.0, running), running
+
+            steps = (segment.reward, segment.done, segment.weight)
+            running, returns = jax.lax.scan(discount, stats["return"], steps)
+            moments = {n: stats[n] for n in ("mean", "var", "count")}
+            moments = merge_moments(moments, returns[..., None], segment.weight)
+            params["reward_norm"] = {"return": running, **moments}
+        return state.replace(params=params)
+
+    def training_reward(self, params: dict, segment: Segment) -> Array:
+        """The reward the learner trains on (`training_reward`), divided first by the
+        running return's std under `normalize_reward` and clipped to +-`REWARD_CLIP`."""
+        if "reward_norm" not in params:
+            return training_reward(segment, self.config)
+        stats = jax.lax.stop_gradient(params["reward_norm"])
+        scaled = segment.reward / jnp.sqrt(stats["var"][0] + 1e-8)
+        segment = segment.replace(reward=jnp.clip(scaled, -REWARD_CLIP, REWARD_CLIP))
+        return training_reward(segment, self.config)
 
     def normalized(self, params: dict, obs: Array) -> Array:
         """What actor and critic see: `obs`, standardised under `normalize_obs`."""

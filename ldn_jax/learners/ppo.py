@@ -23,7 +23,6 @@ from ldn_jax.learners.base import (
     Segment,
     canonical,
     keep_if_any,
-    training_reward,
     weighted_mean,
 )
 
@@ -92,8 +91,8 @@ class Memory:
 class PPO(ActorCritic):
     """Clipped-objective PPO (PPO2) on each segment; Adam with global-norm clipping."""
 
-    def __init__(self, config: AgentConfig, obs_size: int, action_spec):
-        super().__init__(config, obs_size, action_spec)
+    def __init__(self, config: AgentConfig, obs_size: int, action_spec, workers: int = 1):
+        super().__init__(config, obs_size, action_spec, workers)
         self.optimizer = optax.chain(
             optax.clip_by_global_norm(config.max_grad_norm),
             self.per_net(
@@ -108,7 +107,7 @@ class PPO(ActorCritic):
         value = self.value(params, segment.obs)
         next_value = self.value(params, segment.next_obs)
         advantage = gae(
-            training_reward(segment, cfg),
+            self.training_reward(params, segment),
             value,
             next_value,
             segment.terminated,

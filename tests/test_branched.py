@@ -1,0 +1,222 @@
+"""Branched imagination (`model.imagine_start = "real"`), the probabilistic ensemble and the two
+rules the field uses (MBPO's horizon schedule, MACURA's adaptive cut): hand-made numbers and
+buffers, one short run, and the config's refusals."""
+
+import json
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from ldn_jax.buffer import HOLDOUT_EVERY, Transitions, buffer_add, buffer_init, buffer_sample_split
+from ldn_jax.config import ModelConfig, from_preset, validate
+from ldn_jax.dynamics import Dynamics, gaussian_nll
+from ldn_jax.host import flags
+from ldn_jax.host.settings import UsageError
+from ldn_jax.host.training import train
+from ldn_jax.imagination import StepView, macura_threshold, scheduled_horizon, stop_rule
+from ldn_jax.trainer import Trainer
+
+BRANCHED = {
+    "imagine_start": "real",
+    "ld": "ensemble",
+    "probabilistic": True,
+    "ensemble": 3,
+    "elites": 2,
+    "hidden": 16,
+    "hidden_layers": 2,
+    "branches": 6,
+    "imagined_ratio": 2.0,
+    "horizon": 4,
+    "updates": 5,
+}
+"""A small branched config for CartPole (probabilistic ensemble of 3, 2 elites)."""
+
+
+def _config(**overrides):
+    model = {**BRANCHED, **overrides.pop("model", {})}
+    base = dict(env="cartpole-v1", algo="ldn", seeds=2, k=(1.0,), episodes=16, workers=4)
+    return validate(
+        from_preset("paper", **{**base, "chunk_iterations": 2, "model": model, **overrides})
+    )
+
+
+# -- the rules' numbers ----------------------------------------------------------------------
+
+
+def test_the_horizon_schedule_grows_linearly_between_its_step_counts():
+    config = ModelConfig(horizon_min=1, horizon_max=15, horizon_from=20_000, horizon_to=100_000)
+    steps = jnp.array([0, 20_000, 40_000, 59_999, 60_000, 100_000, 10**7])
+    expected = [1, 1, 4, 7, 8, 15, 15]  # 1 + 14 x (t - 20k) / 80k, rounded down
+    assert np.asarray(scheduled_horizon(config, steps)).tolist() == expected
+    flat = ModelConfig(horizon_min=3, horizon_max=3, horizon_from=5, horizon_to=5)
+    assert np.asarray(scheduled_horizon(flat, jnp.array([0, 5, 6]))).tolist() == [3, 3, 3]
+
+
+def test_macuras_threshold_is_a_scaled_quantile_of_the_first_steps_disagreement():
+    first = jnp.array([0.4, 0.1, 0.3, 0.2, 0.5])
+    # Quantile 0.75 of (0.1, ..., 0.5): position 3 of 0..4, 0.4; times 2.
+    assert float(macura_threshold(first, 0.75, 2.0)) == pytest.approx(0.8)
+    # Position 0.9 x 4 = 3.6: 0.4 + 0.6 x 0.1.
+    assert float(macura_threshold(first, 0.9, 1.0)) == pytest.approx(0.46)
+    rule = stop_rule(ModelConfig(), "macura", threshold=jnp.float32(0.46))
+    d = jnp.array([0.1, 0.46, 0.47, 3.0])
+    view = StepView(*(jnp.zeros((4, 1)),) * 3, jnp.zeros(4), d, jnp.ones(4, bool))
+    assert np.asarray(rule(jax.random.key(0), view)).tolist() == [False, False, True, True]
+
+
+def test_the_gaussian_nll_matches_a_hand_computed_value():
+    mean = jnp.array([[0.0, 1.0]])
+    log_var = jnp.array([[0.0, math.log(4.0)]])
+    target = jnp.array([[1.0, 3.0]])
+    # 0.5 (1 + 0 + log 2 pi) and 0.5 (4 / 4 + log 4 + log 2 pi), averaged.
+    expected = 0.5 * (
+        0.5 * (1 + math.log(2 * math.pi)) + 0.5 * (1 + math.log(4) + math.log(2 * math.pi))
+    )
+    assert float(gaussian_nll(mean, log_var, target)) == pytest.approx(expected, rel=1e-6)
+
+
+# -- the buffer's split and the elites -------------------------------------------------------
+
+
+def _buffer(size: int, obs_size: int = 4, action_size: int = 2, capacity: int = 64):
+    """A buffer whose transition i has obs and next obs i (every dimension), reward 0."""
+    index = jnp.arange(size, dtype=jnp.float32)
+    batch = Transitions(
+        obs=jnp.repeat(index[:, None], obs_size, axis=1),
+        action=jnp.zeros((size, action_size)),
+        next_obs=jnp.repeat(index[:, None], obs_size, axis=1),
+        reward=jnp.zeros(size),
+    )
+    return buffer_add(buffer_init(capacity, obs_size, action_size), batch, jnp.ones(size, bool))
+
+
+def test_the_held_out_slots_are_never_drawn_for_the_fit():
+    buffer = _buffer(37)
+    held = buffer_sample_split(buffer, jax.random.key(0), 2000, True).obs[:, 0]
+    fit = buffer_sample_split(buffer, jax.random.key(1), 2000, False).obs[:, 0]
+    assert set(np.asarray(held).astype(int)) == {0, 10, 20, 30}
+    assert set(np.asarray(fit).astype(int)) == set(range(37)) - {0, 10, 20, 30}
+    assert HOLDOUT_EVERY == 10
+
+
+def test_elites_are_the_members_with_the_lowest_held_out_error():
+    dynamics = Dynamics(ModelConfig(**{**BRANCHED, "elites": 2, "ensemble": 4}), 4, 2)
+    state = dynamics.init(jax.random.key(0))
+    # Zero every weight (each member predicts no change), then give member i a constant
+    # reward: its held-out squared error on still transitions of reward 0 grows with |bias|.
+    params = jax.tree.map(jnp.zeros_like, state.params)
+    last = max(name for name in params["params"] if name.startswith("Dense"))
+    offsets = jnp.array([3.0, 0.5, 2.0, 0.1])
+    bias = params["params"][last]["bias"].at[:, 4].set(offsets)  # the reward's mean
+    params["params"][last]["bias"] = bias
+    state = state.replace(params=params)
+    ranked = dynamics._rank(state, _buffer(50), jax.random.key(1))
+    assert np.asarray(ranked.elites).tolist() == [3, 1]
+    expected = np.mean([0.1**2 / 5, 0.5**2 / 5])  # the reward is one of 5 outputs
+    assert float(ranked.error_scale) == pytest.approx(expected, rel=1e-5)
+
+
+# -- branches in a run -----------------------------------------------------------------------
+
+
+def test_a_branch_starts_from_a_state_in_the_real_buffer():
+    trainer = Trainer(_config())
+    state = jax.tree.map(lambda x: x[0, 0], trainer.init_batch())
+    buffer = _buffer(23, obs_size=4, action_size=2, capacity=trainer.config.model.buffer_capacity)
+    buffer = buffer.replace(data=buffer.data.replace(obs=buffer.data.obs * 0.001))
+    state = state.replace(buffer=buffer)
+    _, real = jax.jit(trainer.real_stage)(state, jax.random.key(3))
+    _, episodes = jax.jit(trainer.branch_stage)(state, jax.random.key(4), jnp.float32(1.0), real)
+    steps = episodes.steps
+    starts = np.concatenate([np.ones((1, steps.done.shape[1]), bool), np.asarray(steps.done[:-1])])
+    known = set(np.round(np.asarray(buffer.data.obs[:23, 0]) * 1000).astype(int))
+    first = np.asarray(steps.obs)[starts][:, 0]
+    assert len(first) > steps.done.shape[1]  # rollouts ended and new ones began
+    assert set(np.round(first * 1000).astype(int)) <= known
+    # Every row played is live (the rest of the batch's room is left unplayed) and every
+    # rollout is cut at the horizon (4) at the latest.
+    weight = np.asarray(steps.weight)
+    played = weight.any(axis=1)
+    assert played.sum() % trainer.config.agent.n_steps == 0 and (weight[played] == 1).all()
+    time = np.zeros(weight.shape[1], int)
+    for t in np.flatnonzero(played):
+        time = np.where(starts[t], 1, time + 1)
+        assert (time <= 4).all()
+
+
+@pytest.fixture(scope="module")
+def branched_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("branched")
+    config = _config(model={"real_share": 0.25})
+    summary = train(config, out, checkpoint_every=1, quiet=True)
+    return config, out, summary
+
+
+def test_imagined_counts_are_the_played_weights_and_meet_the_ratio(branched_run):
+    from ldn_jax.host.run_dir import RunDir
+
+    config, out, _ = branched_run
+    trainer = Trainer(config)
+    final = RunDir(out).restore_final(jax.eval_shape(trainer.init_batch))
+    lines = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
+    row = config.model.branches * config.agent.n_steps  # every imagined row is live
+    for seed in range(config.seeds):
+        mine = [line for line in lines if line["seed"] == seed]
+        imagined = np.diff([0] + [line["imagined_steps"] for line in mine])
+        real = np.diff([0] + [line["env_steps"] for line in mine])
+        assert (imagined % row == 0).all() and (imagined > 0).all()
+        assert (imagined >= config.model.imagined_ratio * real).all()
+        assert (imagined < config.model.imagined_ratio * real + row).all()
+        assert int(final.imagined_steps[0, seed]) == mine[-1]["imagined_steps"]
+
+
+def test_a_branched_run_resumes_to_the_uninterrupted_run_bitwise(branched_run, tmp_path):
+    from ldn_jax.host.training import Interrupted
+    from tests.test_resume import StopAfter, _lines
+
+    config, out, _ = branched_run
+    with pytest.raises(Interrupted):
+        train(config, tmp_path, checkpoint_every=1, quiet=True, stop=StopAfter(1))
+    train(config, tmp_path, checkpoint_every=1, quiet=True, resume=True)
+    assert _lines(tmp_path) == _lines(out)
+
+
+# -- the config ------------------------------------------------------------------------------
+
+
+def _build(*argv):
+    return flags.build_config(flags.parse_args(list(argv)))
+
+
+@pytest.mark.parametrize(
+    "argv, needle",
+    [
+        (
+            ["--algo", "ppo-model", "--set", "model.stop=mbpo", "--set", "model.horizon_min=9",
+             "--set", "model.horizon_max=3"],
+            "needs 1 <= horizon_min <= horizon_max, got 9 and 3",
+        ),
+        (["--algo", "ldn", "--set", "model.real_share=1.5"], "real_share must be in [0, 1), got"),
+        (["--algo", "ldn", "--set", "model.real_share=-0.1"], "real_share must be in [0, 1)"),
+        (["--algo", "ppo", "--set", "model.imagine_start=real"], "ppo imagines none"),
+        (["--algo", "a2c", "--set", "model.imagine_start=real"], "a2c imagines none"),
+        (["--algo", "ldn", "--stop", "macura", "--ld", "m0"], "stop 'macura' reads the"),
+        (["--algo", "ldn", "--stop", "m2ac", "--ld", "m0"], "stop 'm2ac' reads the disagreement"),
+        (["--algo", "ldn", "--set", "model.ld=variance"], "it needs model.probabilistic"),
+        (["--algo", "ldn", "--set", "model.probabilistic=true"], "set ld 'ensemble' or 'variance'"),
+        (["--algo", "ldn", "--ld", "ensemble", "--set", "model.elites=9"], "elites must be in [1,"),
+        (["--algo", "ldn", "--set", "model.branches=0"], "branches must be >= 1"),
+    ],
+)  # fmt: skip
+def test_bad_branched_settings_are_one_line(argv, needle):
+    with pytest.raises(UsageError) as error:
+        _build(*argv)
+    assert needle in str(error.value) and "\n" not in str(error.value)
+
+
+def test_macura_defaults_its_estimator_to_the_ensemble():
+    config = _build("--algo", "ppo-model", "--stop", "macura")
+    assert config.model.ld == "ensemble" and config.stop_rule == "macura"
