@@ -61,7 +61,11 @@ def presets_table() -> str:
         parts = [f"`{k}={settings.as_text(v)}`" for k, v in presets.own_fields(entry).items()]
         for kind in ("learners", "envs"):
             for key, values in entry.get(kind, {}).items():
-                inner = ", ".join(f"`{k}={settings.as_text(v)}`" for k, v in values.items())
+                own = presets.own_fields(values)
+                inner = ", ".join(f"`{k}={settings.as_text(v)}`" for k, v in own.items())
+                for learner, fields in values.get("learners", {}).items():
+                    listed = ", ".join(f"`{k}={settings.as_text(v)}`" for k, v in fields.items())
+                    inner += f"; with {learner}: {listed}"
                 parts.append(f"{key}: {inner}")
         sets = "; ".join(parts) or "nothing: the defaults are the paper's"
         rows.append(f"| `{name}` | {_cell(presets.PRESET_PURPOSE[name])} | {sets} |")

@@ -7,12 +7,13 @@ A config field takes the value of the last layer that sets it:
 3. continuous control (`CONTINUOUS`, MuJoCo tasks only);
 4. the task's own (`TASKS`: its budget, chunk and the values measured on it);
 5. the preset (`PRESETS[name]`), then its entry for the learner (`"learners"`), then its entry
-   for the env (`"envs"`);
+   for the env (`"envs"`) and that entry's for the learner;
 6. the `--config` file, then the named flags, then `--set` (`ldn_jax.host.flags`).
 
 Then three rules: a budget given in episodes clears the `steps` budget of every layer below it,
 and an algorithm whose imagination is not stopped by the learning degree keeps only the first
-K (K does nothing there). `--stop m2ac` defaults `model.ld` to "ensemble".
+K (K does nothing there). `--stop m2ac` and `--stop macura` default `model.ld` to "ensemble".
+A preset's model fields apply to model-based algorithms only.
 
 `ldn-jax --explain FIELD` prints the layers that set one field. Why each value is what it is,
 with the measurements that chose it, is in the docs (`docs/defaults.md`).
@@ -123,12 +124,69 @@ PRESETS: dict[str, dict] = {
 """Each preset: fields by dotted name, with optional `"learners"` (learner -> fields) and
 `"envs"` (env -> fields) entries applied after it."""
 
+# SB3 zoo's HalfCheetah PPO in our options (docs/benchmarks.md: at 200k steps its greedy eval
+# beat our locomotion defaults on 5 of 5 seeds).
+_ZOO_HALFCHEETAH_PPO = {
+    "agent.hidden_layers": 2,
+    "agent.actor_hidden": 256,
+    "agent.critic_hidden": 256,
+    "agent.activation": "relu",
+    "agent.log_std_init": -2.0,
+    "agent.gamma": 0.98,
+    "agent.gae_lambda": 0.92,
+    "agent.clip_eps": 0.1,
+    "agent.epochs": 20,
+    "agent.minibatches": 8,
+    "agent.n_steps": 64,
+    "agent.actor_lr": 2.0633e-5,
+    "agent.critic_lr": 2.0633e-5,
+    "agent.entropy_beta": 0.000401762,
+    "agent.value_coef": 0.58096,
+    "agent.max_grad_norm": 0.8,
+}
+
+PRESETS["branched"] = {
+    # Ours: imagination branched from real states in a probabilistic ensemble (docs/training.md,
+    # "Branched imagination"; the measurements that chose it: docs/benchmarks.md).
+    "schedule": "steps",
+    "k": (1.0,),
+    "model.imagine_start": "real",
+    "model.ld": "ensemble",
+    "model.probabilistic": True,
+    "model.ensemble": 5,
+    "model.elites": 4,
+    "model.hidden": 200,
+    "model.hidden_layers": 3,
+    "model.activation": "swish",
+    "model.batch_size": 256,
+    "model.updates": 50,
+    "model.buffer_capacity": 200_000,
+    "model.branches": 32,
+    "model.imagined_ratio": 4.0,
+    "model.real_share": 0.05,
+    "model.horizon": 5,
+    "envs": {
+        # A model fit and an imagined batch every 8 workers x 100 real steps (halfcheetah's
+        # PPO: x 128, two of its 64-step rollouts).
+        "inverted_pendulum": {"iteration_steps": 100},
+        "halfcheetah": {
+            "iteration_steps": 100,
+            "learners": {"ppo": {**_ZOO_HALFCHEETAH_PPO, "iteration_steps": 128}},
+        },
+        "hopper": {"iteration_steps": 100},
+        "walker2d": {"iteration_steps": 100},
+        "ant": {"iteration_steps": 100},
+        "reacher": {"iteration_steps": 100},
+    },
+}
+
 PRESET_PURPOSE = {
     "paper": "the paper's algorithm and constants (the default)",
     "tutorial": "the tutorial code's -5 terminal reward",
     "paper-fig5": "eq. 3 read as Figure 5 shows it (a sum, scaled by 10)",
     "mlp-model": "a ReLU dynamics model predicting state deltas",
     "fast": "CartPole solved: schedule steps, train until the greedy policy solves it",
+    "branched": "ours: short imagined rollouts from real states in a probabilistic ensemble",
 }
 """One line per preset for `--help`, `--list-fields` and the docs."""
 
@@ -145,6 +203,7 @@ def layers(
     model fields apply to model-based algorithms only (`model_based`), so that its
     model-free learner runs with the same constants beside them."""
     task = TASKS.get(env, {})
+    env_entry = PRESETS[preset].get("envs", {}).get(env, {})
     found: list[Layer] = [
         (f"learner {learner}", LEARNER[learner]),
         (
@@ -154,7 +213,8 @@ def layers(
         (f"task {env}", {**own_fields(task), **task.get("learners", {}).get(learner, {})}),
         (f"preset {preset}", own_fields(PRESETS[preset])),
         (f"preset {preset}, {learner}", PRESETS[preset].get("learners", {}).get(learner, {})),
-        (f"preset {preset}, {env}", PRESETS[preset].get("envs", {}).get(env, {})),
+        (f"preset {preset}, {env}", own_fields(env_entry)),
+        (f"preset {preset}, {env}, {learner}", env_entry.get("learners", {}).get(learner, {})),
     ]
     if not model_based:
         model_free = lambda layer, name: (

@@ -220,3 +220,62 @@ def test_bad_branched_settings_are_one_line(argv, needle):
 def test_macura_defaults_its_estimator_to_the_ensemble():
     config = _build("--algo", "ppo-model", "--stop", "macura")
     assert config.model.ld == "ensemble" and config.stop_rule == "macura"
+
+
+def test_a_branched_run_split_over_two_devices_is_the_one_device_run_bitwise(tmp_path):
+    from tests.test_resume import _lines
+    from tests.test_scale import _run
+
+    config = _config(seeds=2, episodes=8)
+    one = tmp_path / "one"
+    train(config, one, checkpoint_every=0, quiet=True, bitwise=True)
+    two = tmp_path / "two"
+    args = ["--config", str(one / "config.json"), "--devices", "2", "--bitwise", "--quiet"]
+    result = _run(*args, "--compile-cache", "none", "--out", str(two), devices=2)
+    assert result.returncode == 0, result.stderr
+    assert json.loads((two / "summary.json").read_text())["devices"] == 2
+    assert _lines(two) == _lines(one)
+
+
+@pytest.mark.parametrize("algo", ["ppo", "ppo-model", "ppo-ldn", "a2c", "a2c-model", "ldn"])
+def test_the_branched_preset_gives_its_model_to_model_based_algorithms_only(algo):
+    config = validate(from_preset("branched", env="halfcheetah", algo=algo))
+    model_based = algo not in ("ppo", "a2c")
+    assert (config.model.imagine_start == "real") == model_based
+    assert config.model.probabilistic == model_based
+    assert config.schedule == "steps" and config.k == (1.0,)
+    # The model-free learner runs with the same constants beside its model-based variants.
+    twin = validate(from_preset("branched", env="halfcheetah", algo=algo.split("-")[0]))
+    assert config.agent == twin.agent and config.iteration_steps == twin.iteration_steps
+    if algo.startswith("ppo"):  # halfcheetah's PPO is the zoo's under this preset
+        assert config.agent.hidden_layers == 2 and config.iteration_steps == 128
+    paper = from_preset("paper", env="halfcheetah", algo=algo)
+    assert paper.model.imagine_start == "initial" and paper.agent.hidden_layers == 1
+
+
+def test_explain_names_the_preset_env_and_learner_layer():
+    given = {"env": ("halfcheetah", "flag"), "algo": ("ppo", "flag")}
+    from ldn_jax.config import explain
+
+    layers = explain("branched", given, "agent.n_steps")
+    assert layers[-1] == ("preset branched, halfcheetah, ppo", 64)
+
+
+@pytest.mark.slow
+def test_the_branched_preset_solves_inverted_pendulum_sooner_than_ppo(tmp_path):
+    """One seed, greedy evaluations after every iteration: the preset's ppo-ldn reaches a
+    greedy return of 900 within 25k real steps, and in fewer steps than ppo beside it."""
+    steps = {}
+    for algo in ("ppo", "ppo-ldn"):
+        config = from_preset(
+            "branched", env="inverted_pendulum", algo=algo, seeds=1, steps=25_000,
+            solved_return=900.0,
+        )  # fmt: skip
+        train(validate(config), tmp_path / algo, checkpoint_every=0, quiet=True)
+        lines = [
+            json.loads(x) for x in (tmp_path / algo / "metrics.jsonl").read_text().splitlines()
+        ]
+        solved = [x["env_steps"] for x in lines if (x.get("greedy_return") or 0) >= 900]
+        steps[algo] = solved[0] if solved else math.inf
+    assert steps["ppo-ldn"] <= 25_000, steps
+    assert steps["ppo-ldn"] < steps["ppo"], steps

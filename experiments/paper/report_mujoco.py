@@ -161,6 +161,22 @@ def table5_finding(env: str, algos: dict[str, dict]) -> str:
         if r.get("imagined_steps_per_seed")
     )
     imagined = f" Imagined steps per seed: {imagined}." if imagined else ""
+    idle = [
+        f"{algo_name(a)} made no update on imagined rows in {r['imagined_updates'].count(0)} "
+        f"of {len(r['imagined_updates'])} runs"
+        + (
+            f" (its row repeats {algo_name(a.split('-')[0])}'s)"
+            if r["imagined_updates"].count(0) == len(r["imagined_updates"])
+            else ""
+        )
+        for a, r in algos.items()
+        if r.get("imagined_updates") and 0 in r["imagined_updates"]
+    ]
+    imagined += (
+        f" {'; '.join(idle)}: PPO learns from the imaginary memory only once it holds a full batch."
+        if idle
+        else ""
+    )
     return (
         f"Table 5, {env}: mean episodes to the top {ours} ({tests}). Reached: "
         f"{reached}{unreached}: {verdict}.{imagined}"

@@ -35,13 +35,23 @@ def episodes_to(history: dict[str, np.ndarray], level: float) -> list[int | None
 
 
 def imagination(history: dict[str, np.ndarray]) -> dict:
-    """Imagined steps per seed over the run and the mean LD of the last 10 iterations (None
-    for model-free runs)."""
+    """Imagined steps per seed over the run, the mean LD of the last 10 iterations (None
+    for model-free runs), and per seed the learner updates made on imagined rows (PPO's
+    imaginary memory learns only from full batches: a run may imagine and never learn from
+    it; None where every imagined segment is learnt from as it is played)."""
     if "ld_mean" not in history:
-        return {"imagined_steps_per_seed": 0.0, "ld_mean_last_iterations": None}
+        return {
+            "imagined_steps_per_seed": 0.0,
+            "ld_mean_last_iterations": None,
+            "imagined_updates": None,
+        }
+    updates = None
+    if "imagined_updates" in history:
+        updates = [int(n) for n in np.nansum(history["imagined_updates"][0], axis=-1)]
     return {
         "imagined_steps_per_seed": float(history["imagined_steps"][0, :, -1].mean()),
         "ld_mean_last_iterations": float(np.nanmean(history["ld_mean"][0, :, -10:])),
+        "imagined_updates": updates,
     }
 
 

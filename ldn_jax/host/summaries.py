@@ -73,12 +73,19 @@ def finite_or_none(value) -> float | None:
     return value if np.isfinite(value) else None
 
 
+def _mean(values: np.ndarray) -> float:
+    """The mean of the finite values; NaN where there is none (no episode has ended yet),
+    without numpy's warning."""
+    finite = np.asarray(values)[np.isfinite(values)]
+    return float(finite.mean()) if finite.size else float("nan")
+
+
 def status(metrics: dict, train_seconds: float) -> str:
     """The live display's text after a chunk."""
     steps = int(metrics["env_steps"].sum(axis=(0, 1))[-1])
-    text = f"moving return {np.nanmean(metrics['moving_return'][..., -1]):7.1f}"
+    text = f"moving return {_mean(metrics['moving_return'][..., -1]):7.1f}"
     if "ld_mean" in metrics:
-        text += f"  LD {np.nanmean(metrics['ld_mean'][..., -1]):.3f}"
+        text += f"  LD {_mean(metrics['ld_mean'][..., -1]):.3f}"
     return text + f"  {steps / max(train_seconds, 1e-9):,.0f} env steps/s"
 
 
