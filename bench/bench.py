@@ -41,6 +41,7 @@ SECTIONS = (
     "train",
     "ceiling",
     "stages",
+    "branched",
     "sweep",
     "rejax",
     "compile",
@@ -332,6 +333,9 @@ def main() -> None:
     if "stages" in sections:
         size = dict(runs=6, warm_episodes=80) if args.quick else {}
         result["stages"] = [stages.stages(algo, **size) for algo in ALGOS]
+    if "branched" in sections:
+        size = dict(seeds=1, warm_iterations=2) if args.quick else {}
+        result["branched_stages"] = stages.branched_stages(**size)
     if "sweep" in sections:
         size = dict(seeds=2, episodes=40) if args.quick else {}
         result["sweep"] = sweep_vs_separate(**size)

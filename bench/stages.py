@@ -12,6 +12,7 @@ masked (a worker whose episode had ended, stepping on until the batch's longest 
 
 from __future__ import annotations
 
+import math
 import time
 
 import jax
@@ -303,3 +304,57 @@ def stages(algo: str, runs: int = 30, warm_episodes: int = 400, env: str = "cart
     row["seconds_per_stage"] = {name: round(v, 4) for name, v in seconds.items()}
     row["share_of_iteration"] = {name: round(v / whole, 3) for name, v in seconds.items()}
     return row
+
+
+def branched_stages(
+    env: str = "halfcheetah", algo: str = "ppo-ldn", seeds: int = 5, warm_iterations: int = 20
+) -> dict:
+    """The `branched` preset's iteration cut into its stages, as `stages` does for the
+    paper's: real play with its updates, the model fit (a probabilistic ensemble), the
+    branched imagination with its updates, and the bookkeeping; seconds per iteration of
+    `seeds` vmapped seeds after `warm_iterations` iterations of training, and each stage's
+    share, so that a 200k-step run's cost splits into play, fit, imagination and update."""
+    config = from_preset("branched", env=env, algo=algo, seeds=seeds, steps=10**9)
+    trainer = Trainer(config)
+    states, gains = trainer.init_batch(), trainer.k_values()
+    chunk = trainer.batched_chunk()
+    for _ in range(warm_iterations):
+        states, _ = chunk(states, gains)
+    jax.block_until_ready(states)
+
+    def prefix(stages: int):
+        def run(state, gain):
+            _, k_real, k_model, k_imagine = jax.random.split(state.key, 4)
+            state, real, _ = trainer.real_steps(state, k_real)
+            if stages >= 2:
+                state, _ = trainer.model_stage(state, real, k_model)
+            if stages >= 3:
+                state, _ = trainer.branch_stage(state, k_imagine, gain, real)
+            return state, real.returns.sum()
+
+        return run
+
+    per_run = lambda fn: written_out(jax.jit(jax.vmap(jax.vmap(fn, (0, None)), (0, 0))))
+    upto = [_best_seconds(per_run(prefix(n)), states, gains) for n in (1, 2, 3)]
+    whole = _best_seconds(per_run(trainer.iteration), states, gains)
+    names = ("real play and update", "model fit", "imagination and update")
+    seconds = {name: upto[i] - (upto[i - 1] if i else 0.0) for i, name in enumerate(names)}
+    seconds["bookkeeping"] = whole - upto[-1]
+    real_steps = config.steps_per_iteration * config.workers
+    return {
+        "what": f"the branched preset's {algo} on {env}, {seeds} seeds, one iteration",
+        "real_steps_per_iteration": real_steps,
+        "imagined_steps_per_iteration": int(
+            math.ceil(
+                config.model.imagined_ratio
+                * real_steps
+                / (config.model.branches * config.agent.n_steps)
+            )
+            * config.model.branches
+            * config.agent.n_steps
+        ),
+        "seconds_per_iteration": round(whole, 4),
+        "seconds_per_stage": {name: round(v, 4) for name, v in seconds.items()},
+        "share_of_iteration": {name: round(v / whole, 3) for name, v in seconds.items()},
+        "seconds_per_200k_steps": round(whole * 200_000 / real_steps, 1),
+    }
