@@ -1,0 +1,163 @@
+"""Stopping rules with branched rollouts (ours; the paper has no such study).
+
+    python -m experiments.paper.branched [--envs ENV,...] [--seeds N] [--steps N]
+        [--results DIR]
+
+Under the `branched` preset (short imagined rollouts from real states in a probabilistic
+ensemble, `docs/training.md`), every rule that can end a branch, side by side with the PPO
+learner alone at the same constants: no rule under the preset's cap of 5 steps, fixed caps of
+1 and 15, MBPO's horizon schedule, the LD draw (disagreement and predicted-variance readings)
+under a cap of 15, M2AC's mask and MACURA's threshold under the same cap. Per rule and env:
+IQM [95% interval] of the final moving return and of the greedy return after training,
+P(improvement) of the greedy return over PPO and over the best fixed cap, imagined steps per
+real step, and training seconds.
+
+Writes DIR/branched/branched.json and branched.md (REPORT.md's section "Stopping rules with
+branched rollouts" is that file); runs are cached in DIR/runs/branched/ and resumed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from experiments.paper import common
+from ldn_jax.config import from_preset, validate
+from ldn_jax.host import stats
+
+BUDGETS = {"inverted_pendulum": 30_000, "hopper": 200_000, "halfcheetah": 200_000}
+"""Real env steps per seed of each env's runs (the issue's: inverted_pendulum 50k)."""
+
+SCHEDULES = {
+    "inverted_pendulum": {"horizon_from": 2_000, "horizon_to": 20_000},
+    "hopper": {"horizon_from": 20_000, "horizon_to": 100_000},
+    "halfcheetah": {"horizon_from": 20_000, "horizon_to": 100_000},
+}
+"""MBPO's schedule (h from 1 to 15) per env: its hopper's step counts, shrunk for the
+pendulum's short budget."""
+
+RULES = {
+    "ppo": ("ppo", {}, "PPO alone (the same constants)"),
+    "cap-5": ("ppo-model", {}, "no rule, cut at 5 steps (the preset)"),
+    "cap-1": ("ppo-model", {"horizon": 1}, "no rule, cut at 1 step"),
+    "cap-15": ("ppo-model", {"horizon": 15}, "no rule, cut at 15 steps"),
+    "mbpo": ("ppo-model", {"stop": "mbpo", "horizon": 15}, "MBPO's horizon schedule, 1 to 15"),
+    "ld": ("ppo-ldn", {"horizon": 15}, "LD draw, disagreement, cap 15"),
+    "ld-variance": ("ppo-ldn", {"ld": "variance", "horizon": 15}, "LD draw, variance, cap 15"),
+    "m2ac": ("ppo-model", {"stop": "m2ac", "horizon": 15}, "M2AC mask, cap 15"),
+    "macura": ("ppo-model", {"stop": "macura", "horizon": 15}, "MACURA threshold, cap 15"),
+}
+"""Rule -> (algorithm, model fields over the preset's, how the report names it)."""
+
+CAPS = ("cap-1", "cap-5", "cap-15")
+
+
+def config_of(env: str, rule: str, seeds: int, steps: int):
+    algo, model, _ = RULES[rule]
+    if model.get("stop") == "mbpo":
+        model = {**model, **SCHEDULES[env]}
+    return validate(
+        from_preset("branched", env=env, algo=algo, seeds=seeds, steps=steps, model=model)
+    )
+
+
+def results_of(env: str, rule: str, out: Path, summary: dict, steps: int) -> dict:
+    runs = summary["runs"]
+    history = common.load_history(out)
+    real = history["env_steps"][0, :, -1]
+    imagined = history["imagined_steps"][0, :, -1]
+    return {
+        "env": env,
+        "rule": rule,
+        "steps": steps,
+        "name": RULES[rule][2],
+        "final_moving_return": [r["final_moving_return"] for r in runs],
+        "eval_return": [r["eval_return"] for r in runs],
+        "imagined_per_real": float(np.mean(imagined / np.maximum(real, 1))),
+        "train_seconds": summary["train_seconds"],
+    }
+
+
+def _versus(row: dict, mine: dict, other: str | None) -> str:
+    """P(improvement) of `row`'s greedy returns over rule `other`'s, as text."""
+    if other is None or other not in mine or other == row["rule"]:
+        return "–"
+    return stats.improvement_text(stats.improvement(row["eval_return"], mine[other]["eval_return"]))
+
+
+def section(rows: list[dict], seeds: int) -> str:
+    """The report's markdown section from the study's rows."""
+    lines = [
+        "## Stopping rules with branched rollouts",
+        "",
+        "Ours, `python -m experiments.paper.branched`: under the `branched` preset every rule "
+        f"ends branches of imagination from real states; {seeds} seeds per row, each env at "
+        "its budget; IQM [95% bootstrap interval]. The greedy return is the trainer's own "
+        "evaluation after training (10 episodes). P(improvement) compares greedy returns.",
+        "",
+    ]
+    for env in dict.fromkeys(r["env"] for r in rows):
+        mine = {r["rule"]: r for r in rows if r["env"] == env}
+        caps = [c for c in CAPS if c in mine]
+        best_cap = max(
+            caps, key=lambda c: stats.iqm(np.asarray(mine[c]["eval_return"])), default=None
+        )
+        lines += [
+            f"### {env}, {next(iter(mine.values()))['steps']:,} steps",
+            "",
+            "| rule | final moving return | greedy return | P(> PPO) | P(> best cap) "
+            "| imagined per real step | training s |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        for row in mine.values():
+            lines.append(
+                f"| {row['name']} | {stats.text(stats.estimate(row['final_moving_return']))} "
+                f"| {stats.text(stats.estimate(row['eval_return']))} | {_versus(row, mine, 'ppo')} "
+                f"| {_versus(row, mine, best_cap)} | {row['imagined_per_real']:.2f} "
+                f"| {row['train_seconds']:.0f} |"
+            )
+        lines.append("")
+        verdicts = []
+        for rule, row in mine.items():
+            if rule == "ppo" or "ppo" not in mine:
+                continue
+            p = stats.improvement(row["eval_return"], mine["ppo"]["eval_return"])
+            low, high = p["ci95"] or (p["probability"], p["probability"])
+            verdict = (
+                "beats PPO" if low > 0.5 else "worse than PPO" if high < 0.5 else "inconclusive"
+            )
+            verdicts.append(f"{row['name']}: {verdict} (P {p['probability']:.2f})")
+        if best_cap:
+            verdicts.append(f"best fixed cap: {RULES[best_cap][2]}")
+        lines += [f"Verdicts on {env}: " + "; ".join(verdicts) + ".", ""]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--envs", default=",".join(BUDGETS))
+    parser.add_argument("--rules", default=",".join(RULES))
+    parser.add_argument("--seeds", type=int, default=10)
+    parser.add_argument("--steps", type=int, default=None, help="every env's budget instead")
+    parser.add_argument("--results", type=Path, default=common.RESULTS)
+    args = parser.parse_args(argv)
+    rows = []
+    for env in args.envs.split(","):
+        steps = args.steps or BUDGETS[env]
+        for rule in args.rules.split(","):
+            config = config_of(env, rule, args.seeds, steps)
+            out = args.results / "runs" / "branched" / f"{env}-{rule}-s{args.seeds}-{steps}"
+            summary = common.ensure_run(config, out)
+            rows.append(results_of(env, rule, out, summary, steps))
+    out = common.out_dir(args.results, "branched")
+    common.write_json(out / "branched.json", {"seeds": args.seeds, "rows": rows})
+    (out / "branched.md").write_text(section(rows, args.seeds))
+    print(f"wrote {out}/branched.json and branched.md")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
