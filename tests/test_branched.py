@@ -151,7 +151,8 @@ def test_a_branch_starts_from_a_state_in_the_real_buffer():
 def branched_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("branched")
     config = _config(model={"real_share": 0.25})
-    summary = train(config, out, checkpoint_every=1, quiet=True)
+    # Compiled bitwise, so that the split over two devices below can be held to it.
+    summary = train(config, out, checkpoint_every=1, quiet=True, bitwise=True)
     return config, out, summary
 
 
@@ -179,8 +180,8 @@ def test_a_branched_run_resumes_to_the_uninterrupted_run_bitwise(branched_run, t
 
     config, out, _ = branched_run
     with pytest.raises(Interrupted):
-        train(config, tmp_path, checkpoint_every=1, quiet=True, stop=StopAfter(1))
-    train(config, tmp_path, checkpoint_every=1, quiet=True, resume=True)
+        train(config, tmp_path, checkpoint_every=1, quiet=True, stop=StopAfter(1), bitwise=True)
+    train(config, tmp_path, checkpoint_every=1, quiet=True, resume=True, bitwise=True)
     assert _lines(tmp_path) == _lines(out)
 
 
@@ -222,13 +223,13 @@ def test_macura_defaults_its_estimator_to_the_ensemble():
     assert config.model.ld == "ensemble" and config.stop_rule == "macura"
 
 
-def test_a_branched_run_split_over_two_devices_is_the_one_device_run_bitwise(tmp_path):
+def test_a_branched_run_split_over_two_devices_is_the_one_device_run_bitwise(
+    branched_run, tmp_path
+):
     from tests.test_resume import _lines
     from tests.test_scale import _run
 
-    config = _config(seeds=2, episodes=8)
-    one = tmp_path / "one"
-    train(config, one, checkpoint_every=0, quiet=True, bitwise=True)
+    _, one, _ = branched_run
     two = tmp_path / "two"
     args = ["--config", str(one / "config.json"), "--devices", "2", "--bitwise", "--quiet"]
     result = _run(*args, "--compile-cache", "none", "--out", str(two), devices=2)

@@ -90,3 +90,13 @@ def test_ldn_is_not_worse_than_a2c_model_on_inverted_pendulum(tmp_path):
         train(config, tmp_path / algo, checkpoint_every=0, quiet=True)
         best[algo] = _best_moving_return(tmp_path / algo).mean()
     assert best["ldn"] >= best["a2c-model"] - LDN_MARGIN, best
+
+
+@pytest.mark.slow
+def test_ppo_reaches_1000_on_hopper_within_300k_steps(tmp_path):
+    """The default PPO on hopper (native engine), one seed: its moving return reaches 1,000
+    within 300k real steps."""
+    config = from_preset("paper", env="hopper", algo="ppo", seeds=1, steps=300_000)
+    summary = train(config, tmp_path, checkpoint_every=0, quiet=True)
+    history = RunDir(tmp_path).history()
+    assert np.nanmax(history["moving_return"]) >= 1000, summary["runs"]

@@ -181,7 +181,7 @@ def _compile_cache(results: Path) -> None:
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
 
 
-# -- the paper's numbers (shared/PAPER.md) -----------------------------------------------------
+# -- the paper's numbers (docs/paper.md) -----------------------------------------------------------
 
 PAPER_ALGOS = {
     "a2c": "A3C",
