@@ -28,6 +28,7 @@ import jax.numpy as jnp
 from bench import stages
 from bench.mujoco_section import mujoco_section
 from bench.seeds import SEED_COUNTS, seed_counts, seed_scaling
+from bench.seeds import mjx_halfcheetah as seed_counts_mjx
 from bench.stages import ALGOS
 from ldn_jax import envs
 from ldn_jax.config import from_preset
@@ -48,6 +49,7 @@ SECTIONS = (
     "scaling",
     "seeds",
     "mujoco",
+    "mjx",
 )
 
 
@@ -298,7 +300,8 @@ def main() -> None:
     if args.probe:
         _probe(args.probe, args.probe_shape)
         return
-    default = [s for s in SECTIONS if s not in ("rejax", "mujoco")] if args.quick else SECTIONS
+    slow = ("rejax", "mujoco", "mjx")  # the anchors' venv, MuJoCo's long runs, a GPU's section
+    default = [s for s in SECTIONS if s not in slow] if args.quick else SECTIONS[:-1]
     sections = set(args.sections.split(",") if args.sections else default)
     result: dict = {
         "jax": jax.__version__,
@@ -339,6 +342,9 @@ def main() -> None:
     if "sweep" in sections:
         size = dict(seeds=2, episodes=40) if args.quick else {}
         result["sweep"] = sweep_vs_separate(**size)
+    if "mjx" in sections:
+        size = dict(counts=(1,), seconds=5.0) if args.quick else {}
+        result["mjx_halfcheetah"] = seed_counts_mjx(**size)
     if "mujoco" in sections:
         result["mujoco"] = mujoco_section(args.quick, args.brax_python)
     if "rejax" in sections:

@@ -155,3 +155,57 @@ def seed_ratios(rows: list[dict]) -> list[dict]:
                 }
             )
     return out
+
+
+MJX_TARGET = 2000.0
+"""The moving return whose wall time `mjx_halfcheetah` reports at its largest seed count."""
+
+
+def mjx_halfcheetah(counts=SEED_COUNTS, seconds: float = 45.0, algo: str = "ppo") -> dict:
+    """PPO (the default's constants) on halfcheetah through MJX at growing vmapped seed
+    counts, each trained for about `seconds` of wall time after its compile: env steps/s once
+    warm, compile seconds, and at the largest count the wall time until the mean moving
+    return first reached `MJX_TARGET` (None if it did not within the time). `bench/gpu.sh`
+    runs it on a GPU; on CPU MJX is the slow engine (docs/benchmarks.md, "MuJoCo engines")."""
+    rows = []
+    for seeds in counts:
+        config = from_preset(
+            "paper", env="halfcheetah", algo=algo, seeds=seeds, backend="mjx", steps=10**9
+        )
+        trainer = Trainer(config)
+        states, k = trainer.init_batch(), trainer.k_values()
+        compiled, lower_s, compile_s = compile_chunk(trainer, states, k)
+        start = time.perf_counter()
+        states, _ = jax.block_until_ready(compiled(states, k))
+        first_s = time.perf_counter() - start
+        steps_before, elapsed, reached, curve = int(states.env_steps.sum()), 0.0, None, []
+        while elapsed < seconds:
+            tick = time.perf_counter()
+            states, _ = jax.block_until_ready(compiled(states, k))
+            elapsed += time.perf_counter() - tick
+            moving = float(jax.numpy.nanmean(states.moving_return))
+            curve.append((round(first_s + elapsed, 2), int(states.env_steps[0, 0]), moving))
+            if reached is None and moving >= MJX_TARGET:
+                reached = round(first_s + elapsed, 2)
+        real = int(states.env_steps.sum()) - steps_before
+        rows.append(
+            {
+                "seeds": seeds,
+                "compile_s": round(lower_s + compile_s, 2),
+                "first_chunk_s": round(first_s, 3),
+                "timed_s": round(elapsed, 3),
+                "env_steps_per_s": round(real / elapsed),
+                "env_steps_per_seed": int(states.env_steps[0, 0]),
+                "final_mean_moving_return": round(curve[-1][2], 1),
+                "seconds_to_target": reached,
+                "curve": curve,
+            }
+        )
+    return {
+        "env": "halfcheetah",
+        "backend": "mjx",
+        "algo": algo,
+        "device": jax.devices()[0].device_kind,
+        "target_moving_return": MJX_TARGET,
+        "rows": rows,
+    }
