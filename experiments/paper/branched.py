@@ -64,9 +64,11 @@ def config_of(env: str, rule: str, seeds: int, steps: int):
     algo, model, _ = RULES[rule]
     if model.get("stop") == "mbpo":
         model = {**model, **SCHEDULES[env]}
-    return validate(
-        from_preset("branched", env=env, algo=algo, seeds=seeds, steps=steps, model=model)
+    solved = SOLVED.get(env)
+    config = from_preset(
+        "branched", env=env, algo=algo, seeds=seeds, steps=steps, model=model, solved_return=solved
     )
+    return validate(config)
 
 
 def results_of(env: str, rule: str, out: Path, summary: dict, steps: int) -> dict:
