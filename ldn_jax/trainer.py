@@ -266,15 +266,7 @@ class Trainer:
         else:
             obs, _ = self._reset(k_reset)
         rule = self.config.stop_rule
-        world = model_world(
-            self.dynamics,
-            state.model,
-            lambda o: self.env.is_terminal(o, self.env_params),
-            self.model_action,
-            self._env_reward(),
-            gain,
-            stop_rule(self.config.model, rule, self._true_next if rule == "oracle" else None),
-        )
+        world = self._model_world(state, gain)
         memory = self.config.model.imagine == "memory"
         if memory:
             k_play, k_learn = jax.random.split(k_play)
@@ -320,15 +312,7 @@ class Trainer:
                 self.dynamics, state.model, obs, self.model_action(action), k_model
             )
             threshold = macura_threshold(first, config.macura_quantile, config.macura_scale)
-        world = model_world(
-            self.dynamics,
-            state.model,
-            lambda o: self.env.is_terminal(o, self.env_params),
-            self.model_action,
-            self._env_reward(),
-            gain,
-            stop_rule(config, rule, self._true_next if rule == "oracle" else None, threshold),
-        )
+        world = self._model_world(state, gain, threshold)
         played = real.lengths.sum()
         horizon = config.horizon
         if rule == "mbpo":
@@ -389,6 +373,21 @@ class Trainer:
             return jax.tree.map(lambda a, b: jnp.concatenate([a, b], axis=1), segment, real)
 
         return mix
+
+    def _model_world(self, state: TrainState, gain: Array, threshold: Array | None = None):
+        """M1 as a world for imagined play, stopped by the run's rule (`threshold`: the
+        macura rule's)."""
+        rule = self.config.stop_rule
+        true_next = self._true_next if rule == "oracle" else None
+        return model_world(
+            self.dynamics,
+            state.model,
+            lambda o: self.env.is_terminal(o, self.env_params),
+            self.model_action,
+            self._env_reward(),
+            gain,
+            stop_rule(self.config.model, rule, true_next, threshold),
+        )
 
     def _true_next(self, key: Array, obs: Array, action: Array) -> Array:
         """The real env's next observations from imagined ones, `[W, d]` (the oracle stop)."""
