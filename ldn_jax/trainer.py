@@ -124,6 +124,7 @@ class Trainer:
 
     def __init__(self, config: Config):
         self.config = config
+        self._jitted: dict = {}  # (program, mesh, bitwise) -> the jitted function, made once
         self.env, params = envs.make(config.env)
         self.env_params = self.env.with_backend(params, config.backend)
         if config.max_steps is not None:
@@ -629,16 +630,23 @@ class Trainer:
         states must then be placed with `sharding.place` and k with `sharding.replicate`.
         `bitwise`: compiled so that the metrics do not depend on how the seeds are split
         (`sharding.BITWISE_COMPILER_OPTIONS`; a device with one seed computes it twice).
+        Made once per trainer, mesh and `bitwise`: a second call reuses its compiled programs.
         """
-        per_seed = jax.vmap(self.train_chunk, in_axes=(0, None))
-        chunk = jax.vmap(per_seed, in_axes=(0, 0))
-        return _jit_seeds(chunk, mesh, bitwise, donate_argnums=0)
+        if ("chunk", mesh, bitwise) not in self._jitted:
+            per_seed = jax.vmap(self.train_chunk, in_axes=(0, None))
+            chunk = jax.vmap(per_seed, in_axes=(0, 0))
+            self._jitted["chunk", mesh, bitwise] = _jit_seeds(
+                chunk, mesh, bitwise, donate_argnums=0
+            )
+        return self._jitted["chunk", mesh, bitwise]
 
     def batched_evaluate(self, mesh: Mesh | None = None, bitwise: bool = False):
         """`(states [K, S], key) -> eval returns [K, S]`, jitted (seeds split as above)."""
-        per_seed = jax.vmap(self.evaluate, in_axes=(0, None))
-        evaluate = jax.vmap(per_seed, in_axes=(0, None))
-        return _jit_seeds(evaluate, mesh, bitwise)
+        if ("evaluate", mesh, bitwise) not in self._jitted:
+            per_seed = jax.vmap(self.evaluate, in_axes=(0, None))
+            evaluate = jax.vmap(per_seed, in_axes=(0, None))
+            self._jitted["evaluate", mesh, bitwise] = _jit_seeds(evaluate, mesh, bitwise)
+        return self._jitted["evaluate", mesh, bitwise]
 
 
 def _jit_seeds(fn, mesh: Mesh | None, bitwise: bool, **jit_kwargs):

@@ -113,7 +113,7 @@ def test_elites_are_the_members_with_the_lowest_held_out_error():
     bias = params["params"][last]["bias"].at[:, 4].set(offsets)  # the reward's mean
     params["params"][last]["bias"] = bias
     state = state.replace(params=params)
-    ranked = dynamics._rank(state, _buffer(50), jax.random.key(1))
+    ranked = jax.jit(dynamics._rank)(state, _buffer(50), jax.random.key(1))
     assert np.asarray(ranked.elites).tolist() == [3, 1]
     expected = np.mean([0.1**2 / 5, 0.5**2 / 5])  # the reward is one of 5 outputs
     assert float(ranked.error_scale) == pytest.approx(expected, rel=1e-5)

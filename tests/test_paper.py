@@ -435,3 +435,33 @@ def test_the_cpu_full_scale_runs_every_mujoco_table_at_1m_steps_with_5_seeds():
         assert (config.seeds, config.steps, config.episode_limit) == (5, 1_000_000, 1000)
     cartpole = common.run_config(scale, "cartpole-v2", "ldn")
     assert cartpole == common.run_config(common.SCALES["cpu"], "cartpole-v2", "ldn")
+
+
+def test_the_locomotion_study_states_each_tasks_ratio_to_the_zoo():
+    from experiments.paper import locomotion
+
+    hopper = {"env": "hopper", "seeds": 2, "steps": 1_000_000, "zoo": 2410.0, "ratio": 0.5}
+    hopper |= {"final_moving_return": [1000.0, 1200.0], "eval_return": [1205.0, 1205.0]}
+    ant = {**hopper, "env": "ant", "zoo": 1327.0, "ratio": 1.1, "eval_return": [1460.0, 1460.0]}
+    text = locomotion.section([hopper | {"wall_seconds": 300.0}, ant | {"wall_seconds": 900.0}])
+    assert "| hopper | 1,000,000 | 2 |" in text and "| 1,205, 1,205 | 2,410 | 0.50 | 300 |" in text
+    assert "At the zoo's figure or above: ant (1 of 2 tasks)." in text
+    config = locomotion.config_of("walker2d", 5)
+    assert (config.algo, config.seeds, config.steps) == ("ppo", 5, 1_000_000)
+
+
+def test_the_branched_study_keeps_earlier_rows_and_names_each_envs_seeds(tmp_path):
+    from experiments.paper import branched
+
+    def row(env, rule, seeds, value):
+        return {"env": env, "rule": rule, "steps": 100, "name": branched.RULES[rule][2],
+                "final_moving_return": [value] * seeds, "eval_return": [value] * seeds,
+                "imagined_per_real": 0.0, "steps_to_solve": None, "train_seconds": 1.0}  # fmt: skip
+
+    rows = [row("hopper", "ppo", 3, 10.0), row("hopper", "cap-5", 3, 20.0), row("x", "ppo", 1, 1)]
+    (tmp_path / "b.json").write_text(json.dumps({"rows": rows}))
+    earlier = branched._earlier(tmp_path / "b.json")
+    assert [(r["env"], r["rule"]) for r in earlier] == [("hopper", "ppo"), ("hopper", "cap-5")]
+    text = branched.section(earlier)
+    assert "### hopper, 100 steps, 3 seeds" in text
+    assert "no rule, cut at 5 steps: beats PPO (P 1.00)" in text

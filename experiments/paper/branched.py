@@ -1,24 +1,26 @@
 """Stopping rules with branched rollouts (ours; the paper has no such study).
 
-    python -m experiments.paper.branched [--envs ENV,...] [--seeds N] [--steps N]
-        [--results DIR]
+    python -m experiments.paper.branched [--envs ENV,...] [--rules RULE,...] [--seeds N]
+        [--steps N] [--results DIR]
 
 Under the `branched` preset (short imagined rollouts from real states in a probabilistic
 ensemble, `docs/training.md`), every rule that can end a branch, side by side with the PPO
-learner alone at the same constants: no rule under the preset's cap of 5 steps, fixed caps of
-1 and 15, MBPO's horizon schedule, the LD draw (disagreement and predicted-variance readings)
-under a cap of 15, M2AC's mask and MACURA's threshold under the same cap. Per rule and env:
-IQM [95% interval] of the final moving return and of the greedy return after training,
+learner alone at the same constants: no rule under fixed caps of 1, 5 and 15 steps, MBPO's
+horizon schedule, the LD draw (disagreement and predicted-variance readings) under a cap of
+15, M2AC's mask and MACURA's threshold under the same cap. Per rule and env: IQM [95%
+interval] of the final moving return and of the greedy return after training,
 P(improvement) of the greedy return over PPO and over the best fixed cap, imagined steps per
 real step, and training seconds.
 
 Writes DIR/branched/branched.json and branched.md (REPORT.md's section "Stopping rules with
-branched rollouts" is that file); runs are cached in DIR/runs/branched/ and resumed.
+branched rollouts" is that file), keeping the rows of envs and rules not run this time; runs
+are cached in DIR/runs/branched/ and resumed.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -46,7 +48,7 @@ pendulum's short budget."""
 
 RULES = {
     "ppo": ("ppo", {}, "PPO alone (the same constants)"),
-    "cap-5": ("ppo-model", {}, "no rule, cut at 5 steps (the preset)"),
+    "cap-5": ("ppo-model", {"horizon": 5}, "no rule, cut at 5 steps"),
     "cap-1": ("ppo-model", {"horizon": 1}, "no rule, cut at 1 step"),
     "cap-15": ("ppo-model", {"horizon": 15}, "no rule, cut at 15 steps"),
     "mbpo": ("ppo-model", {"stop": "mbpo", "horizon": 15}, "MBPO's horizon schedule, 1 to 15"),
@@ -80,6 +82,7 @@ def results_of(env: str, rule: str, out: Path, summary: dict, steps: int) -> dic
         "env": env,
         "rule": rule,
         "steps": steps,
+        "seeds": len(runs),
         "name": RULES[rule][2],
         "final_moving_return": [r["final_moving_return"] for r in runs],
         "eval_return": [r["eval_return"] for r in runs],
@@ -111,14 +114,14 @@ def _versus(row: dict, mine: dict, other: str | None) -> str:
     return stats.improvement_text(_improvement(row, mine[other]))
 
 
-def section(rows: list[dict], seeds: int) -> str:
+def section(rows: list[dict]) -> str:
     """The report's markdown section from the study's rows."""
     lines = [
         "## Stopping rules with branched rollouts",
         "",
         "Ours, `python -m experiments.paper.branched`: under the `branched` preset every rule "
-        f"ends branches of imagination from real states; {seeds} seeds per row, each env at "
-        "its budget; IQM [95% bootstrap interval]. The greedy return is the trainer's own "
+        "ends branches of imagination from real states; each env at its budget; IQM [95% "
+        "bootstrap interval]. The greedy return is the trainer's own "
         "evaluation after training (10 episodes). P(improvement) compares greedy returns, or, "
         "where every rule solves the task in the budget, real steps to a greedy return of 900 "
         "(a run that never gets there counts as the budget plus one step).",
@@ -135,7 +138,8 @@ def section(rows: list[dict], seeds: int) -> str:
         best_cap = max(merit, key=merit.get, default=None)
         solving = any(r.get("steps_to_solve") is not None for r in mine.values())
         lines += [
-            f"### {env}, {next(iter(mine.values()))['steps']:,} steps",
+            f"### {env}, {next(iter(mine.values()))['steps']:,} steps, "
+            f"{max(len(r['eval_return']) for r in mine.values())} seeds",
             "",
             "| rule | final moving return | greedy return |"
             + (" real steps to a greedy 900 | solved |" if solving else "")
@@ -174,6 +178,14 @@ def section(rows: list[dict], seeds: int) -> str:
     return "\n".join(lines)
 
 
+def _earlier(path: Path) -> list[dict]:
+    """The rows an earlier call wrote (rows of rules or envs no longer studied dropped)."""
+    if not path.exists():
+        return []
+    rows = json.loads(path.read_text())["rows"]
+    return [r for r in rows if r["env"] in BUDGETS and r["rule"] in RULES]
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--envs", default=",".join(BUDGETS))
@@ -182,17 +194,22 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, default=None, help="every env's budget instead")
     parser.add_argument("--results", type=Path, default=common.RESULTS)
     args = parser.parse_args(argv)
-    rows = []
+    out = common.out_dir(args.results, "branched")
+    # Rows of earlier calls (other envs, rules or seeds) stay; this call's replace theirs.
+    rows = {(r["env"], r["rule"]): r for r in _earlier(out / "branched.json")}
     for env in args.envs.split(","):
         steps = args.steps or BUDGETS[env]
         for rule in args.rules.split(","):
             config = config_of(env, rule, args.seeds, steps)
-            out = args.results / "runs" / "branched" / f"{env}-{rule}-s{args.seeds}-{steps}"
-            summary = common.ensure_run(config, out)
-            rows.append(results_of(env, rule, out, summary, steps))
-    out = common.out_dir(args.results, "branched")
-    common.write_json(out / "branched.json", {"seeds": args.seeds, "rows": rows})
-    (out / "branched.md").write_text(section(rows, args.seeds))
+            run = args.results / "runs" / "branched" / f"{env}-{rule}-s{args.seeds}-{steps}"
+            summary = common.ensure_run(config, run)
+            rows[env, rule] = results_of(env, rule, run, summary, steps)
+    envs, rules = list(BUDGETS), list(RULES)
+    ordered = [
+        rows[key] for key in sorted(rows, key=lambda k: (envs.index(k[0]), rules.index(k[1])))
+    ]
+    common.write_json(out / "branched.json", {"rows": ordered})
+    (out / "branched.md").write_text(section(ordered))
     print(f"wrote {out}/branched.json and branched.md")
     return 0
 

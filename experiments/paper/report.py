@@ -165,9 +165,11 @@ def render(results: Path, scale: common.Scale) -> str:
     ]
     for section in (setup(data, scale), summary, *body):
         lines += render_section(section)
-    branched = results / "branched" / "branched.md"  # experiments/paper/branched.py's
-    if branched.exists():
-        lines += ["", branched.read_text().strip(), ""]
+    # The studies run on their own (experiments/paper/locomotion.py and branched.py).
+    for study in ("locomotion", "branched"):
+        text = results / study / f"{study}.md"
+        if text.exists():
+            lines += ["", text.read_text().strip(), ""]
     return "\n".join(lines)
 
 

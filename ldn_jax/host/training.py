@@ -21,7 +21,7 @@ from ldn_jax.config import Config
 from ldn_jax.host import summaries
 from ldn_jax.host.loggers import Logger, NullLogger
 from ldn_jax.host.run_dir import FINAL, RunDir
-from ldn_jax.host.runtime import compile_chunk
+from ldn_jax.host.runtime import compile_chunk, evaluator
 from ldn_jax.trainer import Trainer
 
 
@@ -125,7 +125,9 @@ def train(config: Config, out: Path, options: TrainOptions | None = None, **fiel
     progress.update(history, "compiling..." if not done() else "evaluating...")
     try:
         if not done():
-            chunk_fn, lower_s, compile_s = compile_chunk(trainer, states, k, mesh, bitwise)
+            chunk_fn, lower_s, compile_s = compile_chunk(
+                trainer, states, k, mesh, bitwise, reuse=True
+            )
             if session["compile_seconds"] is None:
                 session["compile_seconds"] = lower_s + compile_s
             loop = ChunkLoop(config, options, run, history, session, progress, reported)
@@ -137,7 +139,7 @@ def train(config: Config, out: Path, options: TrainOptions | None = None, **fiel
         if mesh is not None:
             eval_key = sharding.replicate(eval_key, mesh)
         t0 = time.perf_counter()
-        evaluate = trainer.batched_evaluate(mesh, bitwise)
+        evaluate = evaluator(trainer, mesh, bitwise)
         eval_returns = sharding.to_host(evaluate(states, eval_key))
         eval_seconds = time.perf_counter() - t0
     finally:

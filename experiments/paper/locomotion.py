@@ -1,0 +1,148 @@
+"""PPO on the four locomotion tasks at the default budget, against rl-baselines3-zoo's PPO.
+
+    python -m experiments.paper.locomotion [--envs ENV,...] [--seeds N] [--results DIR]
+
+Not a table of the paper: what `--algo ppo` gives on halfcheetah, hopper, walker2d and ant at
+its default budget (1M real steps, `ldn_jax.presets.TASKS`), as `ldn-jax --env ENV --algo ppo
+--seeds 5` starts it, beside the figure users know: the zoo's benchmark, one tuned SB3 PPO run
+per task after 1M steps. Per task: the final moving return and the trainer's greedy evaluation
+after training (10 episodes) per seed, their IQM [95% interval], the ratio of the greedy IQM to
+the zoo's figure, and the wall time.
+
+Writes DIR/locomotion/locomotion.json, locomotion.md (REPORT.md's section "PPO on the
+locomotion tasks against the zoo") and locomotion.png; runs are cached in
+DIR/runs/locomotion/ and resumed, and rows of tasks not run this time are kept.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from experiments.paper import common
+from ldn_jax.config import from_preset, validate
+from ldn_jax.host import stats
+
+ZOO = {"halfcheetah": 5819.0, "hopper": 2410.0, "walker2d": 3479.0, "ant": 1327.0}
+"""rl-baselines3-zoo's benchmark table (PPO, 1M steps, one run per task, its own tuned
+hyperparameters; Ant with the default ones)."""
+
+TITLE = "PPO on the locomotion tasks against the zoo"
+
+
+def config_of(env: str, seeds: int):
+    return validate(from_preset("paper", env=env, algo="ppo", seeds=seeds))
+
+
+def row_of(env: str, out: Path, summary: dict) -> dict:
+    runs = summary["runs"]
+    history = common.load_history(out)
+    evals = [r["eval_return"] for r in runs]
+    greedy = stats.estimate(evals)
+    return {
+        "env": env,
+        "seeds": len(runs),
+        "steps": int(history["env_steps"][0, :, -1].mean()),
+        "final_moving_return": [r["final_moving_return"] for r in runs],
+        "eval_return": evals,
+        "zoo": ZOO[env],
+        "ratio": greedy["iqm"] / ZOO[env],
+        "wall_seconds": summary["train_seconds"] + summary["compile_seconds"],
+    }
+
+
+def section(rows: list[dict]) -> str:
+    lines = [
+        f"## {TITLE}",
+        "",
+        "Ours, `python -m experiments.paper.locomotion`: `--algo ppo` at its default budget and "
+        "constants on each task (the native MuJoCo engine, 2 CPU cores), beside "
+        "rl-baselines3-zoo's PPO after 1M steps (one tuned run per task). IQM [95% bootstrap "
+        "interval] over seeds; the greedy return is the trainer's own evaluation after "
+        "training (10 episodes); the ratio is the greedy IQM over the zoo's figure. "
+        "Curves: ![locomotion](locomotion/locomotion.png)",
+        "",
+        "| task | real steps | seeds | final moving return | per seed | greedy return "
+        "| per seed | zoo PPO | ratio | wall s |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['env']} | {r['steps']:,} | {r['seeds']} "
+            f"| {stats.text(stats.estimate(r['final_moving_return']))} "
+            f"| {', '.join(f'{v:,.0f}' for v in r['final_moving_return'])} "
+            f"| {stats.text(stats.estimate(r['eval_return']))} "
+            f"| {', '.join(f'{v:,.0f}' for v in r['eval_return'])} "
+            f"| {r['zoo']:,.0f} | {r['ratio']:.2f} | {r['wall_seconds']:.0f} |"
+        )
+    met = [r["env"] for r in rows if r["ratio"] >= 1.0]
+    lines += [
+        "",
+        f"At the zoo's figure or above: {', '.join(met) if met else 'none'} "
+        f"({len(met)} of {len(rows)} tasks).",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def curves(runs: dict[str, Path], path: Path) -> None:
+    """One panel per task run this time: moving return (mean, 95% band over seeds) against
+    real env steps, with the zoo's figure dashed."""
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter
+
+    from ldn_jax.host.plots import band_panel
+
+    if not runs:
+        return
+    fig, axes = plt.subplots(1, len(runs), figsize=(4.4 * len(runs), 3.5), dpi=110, squeeze=False)
+    for ax, (env, out) in zip(axes[0], runs.items(), strict=True):
+        history = common.load_history(out)
+        moving = history["moving_return"][0]
+        steps = history["env_steps"][0].mean(axis=0)
+        band_panel(ax, {"ppo": (steps, moving)}, env, ZOO[env], "zoo PPO at 1M", legend_size=7)
+        ax.set_xlabel("real env steps (mean over seeds)")
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1000:,.0f}k"))
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def _run_dir(results: Path, env: str, seeds: int) -> Path:
+    return results / "runs" / "locomotion" / f"{env}-ppo-s{seeds}"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--envs", default=",".join(ZOO))
+    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--results", type=Path, default=common.RESULTS)
+    args = parser.parse_args(argv)
+    envs = args.envs.split(",")
+    unknown = [env for env in envs if env not in ZOO]
+    if unknown:
+        parser.error(f"--envs: {', '.join(unknown)} not in {', '.join(ZOO)}")
+    out = common.out_dir(args.results, "locomotion")
+    record = out / "locomotion.json"
+    rows = {r["env"]: r for r in json.loads(record.read_text())["rows"]} if record.exists() else {}
+    for env in envs:
+        run = _run_dir(args.results, env, args.seeds)
+        summary = common.ensure_run(config_of(env, args.seeds), run)
+        rows[env] = row_of(env, run, summary)
+    ordered = [rows[env] for env in ZOO if env in rows]
+    common.write_json(record, {"machine": common.machine(), "rows": ordered})
+    (out / "locomotion.md").write_text(section(ordered))
+    # The curves of every row whose run is at hand (runs are not kept in git).
+    at_hand = {r["env"]: _run_dir(args.results, r["env"], r["seeds"]) for r in ordered}
+    curves(
+        {env: d for env, d in at_hand.items() if (d / "summary.json").exists()},
+        out / "locomotion.png",
+    )
+    print(f"wrote {out}/locomotion.json, locomotion.md and locomotion.png")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
