@@ -69,6 +69,17 @@ def test_resume_after_interrupt_equals_uninterrupted_run_bitwise(reference, tmp_
     np.testing.assert_array_equal(final(tmp_path), final(ref_dir))
 
 
+def test_a_second_run_of_the_same_config_reuses_its_program_and_equals_the_first(
+    reference, tmp_path
+):
+    ref_dir, ref_summary = reference
+    summary = train(from_preset("paper", **CONFIG), tmp_path, checkpoint_every=2, quiet=True)
+    assert ref_summary["compile_seconds"] > 0 and summary["compile_seconds"] == 0
+    assert _lines(tmp_path) == _lines(ref_dir)
+    other = from_preset("paper", **{**CONFIG, "episodes": 40})  # another config: compiled
+    assert train(other, tmp_path / "other", quiet=True)["compile_seconds"] > 0
+
+
 def _start(out: Path, *extra: str) -> subprocess.Popen:
     args = ["--env", "cartpole-v0", "--algo", "a2c", "--seeds", "2", "--episodes", "1600"]
     args += ["--workers", "4", "--chunk", "1", "--quiet", "--out", str(out), *extra]
