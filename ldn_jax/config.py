@@ -150,6 +150,11 @@ class AgentConfig:
     """PPO: weight of the value loss."""
     max_grad_norm: float = 0.5
     """PPO: gradients are clipped to this global norm before the Adam step."""
+    target_kl: float | None = None
+    """PPO: None, every epoch runs; a number, an update stops (skips its remaining minibatch
+    steps) at the first minibatch whose approximate KL from the rollout's policy exceeds 1.5
+    times it, as SB3's `target_kl` does. The losses then report `kl_stopped`, the share of
+    the update's minibatch steps skipped."""
 
 
 @dataclass(frozen=True)
@@ -738,6 +743,10 @@ def validate(config: Config) -> Config:
         (config.agent.epochs >= 1, "epochs must be >= 1"),
         (config.agent.minibatches >= 1, "minibatches must be >= 1"),
         (config.agent.max_grad_norm > 0, "max_grad_norm must be > 0"),
+        (
+            config.agent.target_kl is None or config.agent.target_kl > 0,
+            f"target_kl must be > 0 (or None: no stop), got {config.agent.target_kl}",
+        ),
         (config.model.activation in ACTIVATIONS, f"model activation must be one of {ACTIVATIONS}"),
         (config.model.lr > 0, "model lr must be > 0"),
         (config.model.updates >= 0, "model updates must be >= 0"),

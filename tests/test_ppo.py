@@ -256,3 +256,30 @@ def test_ppo_update_raises_probability_of_the_better_action():
     assert float(prob(new.params)) > float(prob(state.params)) + 0.05
     # The first pass starts at ratio 1; later passes move it, within reason.
     assert 0 <= float(info["clip_fraction"]) <= 1 and float(info["approx_kl"]) >= 0
+
+
+def test_target_kl_stops_an_update_at_the_first_minibatch_past_it():
+    agent = lambda target: (
+        from_preset(
+            "paper", algo="ppo", agent={"minibatches": 4, "epochs": 3, "target_kl": target}
+        ).agent
+    )
+    segment = _segment(jax.random.key(1), 8, 4)
+    runs = {}
+    for target in (None, 1e9, 1e-9):
+        learner = PPO(agent(target), obs_size=4, action_spec=2)
+        state = learner.init(jax.random.key(0))
+        runs[target] = jax.jit(learner.update)(state, segment, jax.random.key(2))
+    # Never reached: every step is taken (to float32 rounding: the guard's program fuses
+    # differently; with target_kl None the program is the one without a guard).
+    for x, y in zip(jax.tree.leaves(runs[1e9][0]), jax.tree.leaves(runs[None][0]), strict=True):
+        np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=1e-5, atol=1e-8)
+    assert float(runs[1e9][1]["kl_stopped"]) == 0.0 and "kl_stopped" not in runs[None][1]
+    # Reached at once: the first step (at KL 0, the rollout's own policy) is taken, and the
+    # second minibatch finds KL > 0 and stops the 11 steps left.
+    (stopped, info), (full, _) = runs[1e-9], runs[None]
+    assert float(info["kl_stopped"]) == pytest.approx(11 / 12)
+    first = lambda s: np.asarray(jax.tree.leaves(s.params)[0])
+    assert not np.array_equal(first(stopped), first(state)) and not np.array_equal(
+        first(stopped), first(full)
+    )

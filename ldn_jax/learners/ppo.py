@@ -171,6 +171,16 @@ class PPO(ActorCritic):
         new = LearnerState(optax.apply_updates(state.params, updates), opt_state)
         return keep_if_any(new, state, batch.weight), (info, batch.weight.sum() > 0)
 
+    def _guarded_step(self, carry: tuple[LearnerState, Array], batch: Batch):
+        """`minibatch_step` under `target_kl`: once a minibatch's approximate KL (at the
+        parameters before its step) exceeds 1.5 x target_kl, it and every later minibatch of
+        the update leave the state as it is."""
+        state, stopped = carry
+        new, (info, live) = self.minibatch_step(state, batch)
+        stopped = stopped | (live & (info["approx_kl"] > 1.5 * self.config.target_kl))
+        state = jax.tree.map(lambda a, b: jnp.where(stopped, b, a), new, state)
+        return (state, stopped), ({**info, "kl_stopped": stopped.astype(jnp.float32)}, live)
+
     def update(
         self, state: LearnerState, segment: Segment, key: Array | None = None
     ) -> tuple[LearnerState, dict]:
@@ -192,14 +202,18 @@ class PPO(ActorCritic):
         pad = size * cfg.minibatches - rows
         batch = jax.tree.map(lambda x: jnp.pad(x, [(0, pad)] + [(0, 0)] * (x.ndim - 1)), batch)
 
-        def epoch(state: LearnerState, key: Array):
+        step = self.minibatch_step if cfg.target_kl is None else self._guarded_step
+
+        def epoch(state, key: Array):
             order = prng.permutation(key, rows + pad)
             shuffled = jax.tree.map(
                 lambda x: x[order].reshape((cfg.minibatches, size, *x.shape[1:])), batch
             )
-            return jax.lax.scan(self.minibatch_step, state, shuffled)
+            return jax.lax.scan(step, state, shuffled)
 
-        state, (info, live) = jax.lax.scan(epoch, state, jax.random.split(key, cfg.epochs))
+        carry = state if cfg.target_kl is None else (state, jnp.bool_(False))
+        carry, (info, live) = jax.lax.scan(epoch, carry, jax.random.split(key, cfg.epochs))
+        state = carry if cfg.target_kl is None else carry[0]
         live = live.astype(jnp.float32)
         info = jax.tree.map(lambda x: (x * live).sum() / jnp.maximum(live.sum(), 1.0), info)
         return state, info
