@@ -148,7 +148,8 @@ def section(rows: list[dict]) -> str:
         ]
         for row in mine.values():
             lines.append(
-                f"| {row['name']} | {stats.text(stats.estimate(row['final_moving_return']))} "
+                f"| {RULES[row['rule']][2]} "
+                f"| {stats.text(stats.estimate(row['final_moving_return']))} "
                 f"| {stats.text(stats.estimate(row['eval_return']))} | "
                 + (
                     f"{stats.text(stats.estimate(row['steps_to_solve']))} | "
@@ -171,7 +172,7 @@ def section(rows: list[dict]) -> str:
             verdict = (
                 "beats PPO" if low > 0.5 else "worse than PPO" if high < 0.5 else "inconclusive"
             )
-            verdicts.append(f"{row['name']}: {verdict} (P {p['probability']:.2f})")
+            verdicts.append(f"{RULES[row['rule']][2]}: {verdict} (P {p['probability']:.2f})")
         if best_cap:
             verdicts.append(f"best fixed cap: {RULES[best_cap][2]}")
         lines += [f"Verdicts on {env}: " + "; ".join(verdicts) + ".", ""]
