@@ -104,7 +104,9 @@ def _fail_on_second(monkeypatch, module, name: str, only=lambda path: True):
     monkeypatch.setattr(module, name, full)
 
 
-@pytest.mark.parametrize("fails", ["orbax state", "host file"])
+@pytest.mark.parametrize(  # the orbax write: slow (the default suite's time)
+    "fails", [pytest.param("orbax state", marks=pytest.mark.slow), "host file"]
+)
 def test_a_full_disk_stops_the_run_with_one_line_and_resume_works_afterwards(
     reference, tmp_path, monkeypatch, capsys, fails
 ):

@@ -45,7 +45,7 @@ PPO_GRID = (("agent.actor_lr", (7.5e-4, 3e-3)),)
     ("algo", "grid", "agent", "singles"),
     [
         # the diagonal of the 2 x 2 grid: both fields change between its two points
-        ("a2c", GRID, {}, (0, 3)),
+        pytest.param("a2c", GRID, {}, (0, 3), marks=SLOW),  # the default suite: ppo's
         pytest.param("a2c", GRID, {}, (0, 1, 2, 3), marks=SLOW),
         # PPO keeps its learning rate in Adam's state (inject_hyperparams): each point must
         # start from its own, so the point off the default is the one that can go wrong

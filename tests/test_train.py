@@ -274,7 +274,10 @@ def test_imagined_batch_fills_a_whole_segment_with_back_to_back_episodes():
     assert len(np.unique(starts, axis=0)) > workers  # restarts drawn from the pool
 
 
-@pytest.mark.parametrize("algo", ["a2c", "ldn", "ppo-ldn"])
+@pytest.mark.parametrize(  # one learner in the default suite (its time); the rest: slow
+    "algo", [pytest.param("a2c", marks=pytest.mark.slow), "ldn",
+             pytest.param("ppo-ldn", marks=pytest.mark.slow)]
+)  # fmt: skip
 def test_same_seed_gives_bitwise_identical_metrics(algo):
     trainer = Trainer(_config(algo=algo, k=(1.0, 2.0) if algo.endswith("ldn") else (1.0,)))
     _, first = _run_chunks(trainer, trainer.init_batch())
