@@ -444,7 +444,9 @@ def test_the_locomotion_study_states_each_tasks_ratio_to_the_zoo():
     hopper |= {"final_moving_return": [1000.0, 1200.0], "eval_return": [1205.0, 1205.0]}
     ant = {**hopper, "env": "ant", "zoo": 1327.0, "ratio": 1.1, "eval_return": [1460.0, 1460.0]}
     text = locomotion.section([hopper | {"wall_seconds": 300.0}, ant | {"wall_seconds": 900.0}])
-    assert "| hopper | 1,000,000 | 2 |" in text and "| 1,205, 1,205 | 2,410 | 0.50 | 300 |" in text
+    assert (
+        "| hopper | 1,000,000 | 2 |" in text and "| 1,205, 1,205 | 2,410 | 0.50 | 0 | 300 |" in text
+    )
     assert "At the zoo's figure or above: ant (1 of 2 tasks)." in text
     config = locomotion.config_of("walker2d", 5)
     assert (config.algo, config.seeds, config.steps) == ("ppo", 5, 1_000_000)

@@ -50,6 +50,7 @@ def row_of(env: str, out: Path, summary: dict) -> dict:
         "zoo": ZOO[env],
         "ratio": greedy["iqm"] / ZOO[env],
         "wall_seconds": summary["train_seconds"] + summary["compile_seconds"],
+        "diverged": sum(bool(r["diverged"]) for r in runs),
     }
 
 
@@ -61,12 +62,13 @@ def section(rows: list[dict]) -> str:
         "constants on each task (the native MuJoCo engine, 2 CPU cores), beside "
         "rl-baselines3-zoo's PPO after 1M steps (one tuned run per task). IQM [95% bootstrap "
         "interval] over seeds; the greedy return is the trainer's own evaluation after "
-        "training (10 episodes); the ratio is the greedy IQM over the zoo's figure. "
+        "training (10 episodes); the ratio is the greedy IQM over the zoo's figure; a seed whose "
+        "parameters went non-finite is frozen at its last finite state and counted as diverged. "
         "Curves: ![locomotion](locomotion/locomotion.png)",
         "",
         "| task | real steps | seeds | final moving return | per seed | greedy return "
-        "| per seed | zoo PPO | ratio | wall s |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| per seed | zoo PPO | ratio | diverged | wall s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         lines.append(
@@ -75,7 +77,8 @@ def section(rows: list[dict]) -> str:
             f"| {', '.join(f'{v:,.0f}' for v in r['final_moving_return'])} "
             f"| {stats.text(stats.estimate(r['eval_return']))} "
             f"| {', '.join(f'{v:,.0f}' for v in r['eval_return'])} "
-            f"| {r['zoo']:,.0f} | {r['ratio']:.2f} | {r['wall_seconds']:.0f} |"
+            f"| {r['zoo']:,.0f} | {r['ratio']:.2f} | {r.get('diverged', 0)} "
+            f"| {r['wall_seconds']:.0f} |"
         )
     met = [r["env"] for r in rows if r["ratio"] >= 1.0]
     lines += [
