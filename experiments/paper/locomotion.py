@@ -66,7 +66,7 @@ def section(rows: list[dict]) -> str:
         "parameters went non-finite is frozen at its last finite state and counted as diverged. "
         "Curves: ![locomotion](locomotion/locomotion.png)",
         "",
-        "| task | real steps | seeds | final moving return | per seed | greedy return "
+        "| task | real steps, mean | seeds | final moving return | per seed | greedy return "
         "| per seed | zoo PPO | ratio | diverged | wall s |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
