@@ -447,7 +447,10 @@ def test_the_locomotion_study_states_each_tasks_ratio_to_the_zoo():
     assert (
         "| hopper | 1,000,000 | 2 |" in text and "| 1,205, 1,205 | 2,410 | 0.50 | 0 | 300 |" in text
     )
-    assert "At the zoo's figure or above: ant (1 of 2 tasks)." in text
+    assert (
+        "At the zoo's figure or above: ant (1 of 2 tasks). Not measured yet: halfcheetah, "
+        "walker2d." in text
+    )
     config = locomotion.config_of("walker2d", 5)
     assert (config.algo, config.seeds, config.steps) == ("ppo", 5, 1_000_000)
 

@@ -81,10 +81,12 @@ def section(rows: list[dict]) -> str:
             f"| {r['wall_seconds']:.0f} |"
         )
     met = [r["env"] for r in rows if r["ratio"] >= 1.0]
+    missing = [env for env in ZOO if env not in {r["env"] for r in rows}]
     lines += [
         "",
         f"At the zoo's figure or above: {', '.join(met) if met else 'none'} "
-        f"({len(met)} of {len(rows)} tasks).",
+        f"({len(met)} of {len(rows)} tasks)."
+        + (f" Not measured yet: {', '.join(missing)}." if missing else ""),
         "",
     ]
     return "\n".join(lines)
