@@ -97,7 +97,8 @@ def device_mesh(args: argparse.Namespace, seeds: int):
 
 
 KEPT_PROGRAMS = 4
-"""Compiled programs a process keeps for `reuse` (the newest; each holds its executable)."""
+"""Programs a process keeps (the newest): compiled chunks for `reuse` and `evaluator`'s jitted
+functions share the slots, so two configs' worth."""
 
 _programs: collections.OrderedDict = collections.OrderedDict()
 
@@ -107,10 +108,10 @@ def compile_chunk(
 ) -> tuple[object, float, float]:
     """`(compiled chunk, lower seconds, compile seconds)`; `states` may be abstract.
 
-    Lowering (tracing) always runs; XLA's compile is what the persistent cache skips.
-    `reuse`: a chunk this process compiled for an equal config, mesh and state shapes is
-    returned as it is, with 0 seconds (a resumed or repeated run in the same process: `train`
-    called again, a notebook, the tests).
+    Without `reuse`, lowering (tracing) always runs and XLA's compile is what the persistent
+    cache skips. With it, a chunk this process compiled for an equal config, mesh and state
+    shapes is returned as it is, neither traced nor compiled, with 0 seconds (a resumed or
+    repeated run in the same process: `train` called again, a notebook, the tests).
     """
     key = (trainer.config, mesh, bitwise, _signature(states, mesh), _signature(k, mesh))
     if reuse and key in _programs:
