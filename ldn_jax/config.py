@@ -20,6 +20,7 @@ from ldn_jax.envs.mujoco import BACKEND_CHOICES
 from ldn_jax.presets import Layer
 
 ACTIVATIONS = tuple(networks.ACTIVATIONS)
+INITS = tuple(networks.INITS)
 """Hidden activations the networks know (`ldn_jax.networks` owns them)."""
 
 IMAGINE_MODES = ("episodes", "memory", "batch")
@@ -109,6 +110,11 @@ class AgentConfig:
     """Hidden activation of actor and critic."""
     init_std: float = 0.1
     """Standard deviation of the normal weight initialiser (biases start at zero)."""
+    init: str = "normal"
+    """How actor and critic weights start, one of `INITS`: "normal", a normal of `init_std`
+    in every layer (the tutorial code's); "fan_in", uniform in +-1/sqrt(fan_in), PyTorch's
+    default for a linear layer and so SB3's PPO without its orthogonal init (biases start at
+    zero in both)."""
     normalize_obs: bool = False
     """Actor and critic see observations standardised by the running mean and variance of
     the real observations seen so far, clipped to +-10 standard deviations (`OBS_CLIP` in
@@ -128,6 +134,11 @@ class AgentConfig:
     the tutorial code's); a number, the std is exp of a learned log std per action
     dimension, the same in every state, starting at this value (SB3's PPO: 0; its zoo's
     MuJoCo runs: -2)."""
+    squash_mean: bool = True
+    """Continuous actions: the Gaussian's mean is tanh(.) scaled into the action bounds (the
+    tutorial code's); False: the mean is the actor's output scaled by the bounds' half-width
+    and unbounded, and the env gets the sampled action clipped to the bounds (SB3's PPO), so
+    a policy can push an action to its bound and keep it there."""
     terminal_reward: float | None = None
     """If set, the training reward of a terminating step is replaced by this value (the
     tutorial code uses -5). Reported returns are always the environment's own."""
@@ -717,6 +728,10 @@ def validate(config: Config) -> Config:
             agent.log_std_init is None or _continuous(config.env),
             "log_std_init is for continuous actions (a Gaussian policy's std)",
         ),
+        (
+            agent.squash_mean or _continuous(config.env),
+            "squash_mean is for continuous actions (a Gaussian policy's mean)",
+        ),
         (agent.init_std > 0, f"agent init_std must be > 0, got {agent.init_std}"),
         (agent.min_std > 0, f"min_std must be > 0, got {agent.min_std}"),
         (agent.entropy_beta >= 0, f"entropy_beta must be >= 0, got {agent.entropy_beta}"),
@@ -734,6 +749,7 @@ def validate(config: Config) -> Config:
         ),
         (config.agent.actor_lr > 0 and config.agent.critic_lr > 0, "learning rates must be > 0"),
         (config.agent.activation in ACTIVATIONS, f"activation must be one of {ACTIVATIONS}"),
+        (config.agent.init in INITS, f"init must be one of {', '.join(INITS)}"),
         (0 <= config.agent.gae_lambda <= 1, "gae_lambda must be in [0, 1]"),
         (config.agent.clip_eps > 0, "clip_eps must be > 0"),
         (

@@ -34,6 +34,24 @@ def normal_init(std: float):
     return init
 
 
+INITS = ("normal", "fan_in")
+"""Weight initialisers of the actor-critic's MLPs (`AgentConfig.init`)."""
+
+
+def kernel_init(init: str, std: float):
+    """ "normal": `normal_init(std)`; "fan_in": uniform in +-1/sqrt(fan_in) (PyTorch's
+    `nn.Linear` default, kaiming-uniform with a = sqrt(5))."""
+    if init == "fan_in":
+
+        def uniform(key: Array, shape, dtype=jnp.float32) -> Array:
+            # the barrier as in `normal_init`: the same weights jitted as eagerly
+            sample = jax.lax.optimization_barrier(jax.random.uniform(key, shape, dtype, -1, 1))
+            return sample * jnp.asarray(1.0 / shape[0] ** 0.5, dtype)
+
+        return uniform
+    return normal_init(std)
+
+
 @jax.custom_vjp
 def _matmul(x: Array, kernel: Array) -> Array:
     """`x @ kernel` over the last axis of `x`, as `nn.Dense` computes it."""
@@ -87,10 +105,12 @@ class MLP(nn.Module):
     activation: str
     init_std: float
     layers: int = 1
+    weight_init: str = "normal"
+    """One of `INITS`."""
 
     @nn.compact
     def __call__(self, x: Array) -> Array:
-        init = normal_init(self.init_std)
+        init = kernel_init(self.weight_init, self.init_std)
         dense = lambda size: nn.Dense(size, kernel_init=init, dot_general=dense_dot_general)
         for _ in range(self.layers):
             x = ACTIVATIONS[self.activation](dense(self.hidden)(x))

@@ -308,6 +308,33 @@ def test_a_state_independent_log_std_starts_at_its_value_and_learns():
     assert not np.allclose(np.asarray(new.params["log_std"]), -2.0)  # the actor's optimiser
 
 
+def test_an_unsquashed_mean_passes_the_bounds_and_the_env_gets_the_bound():
+    from ldn_jax.learners.base import Gaussian
+
+    out = jnp.array([[3.0, -0.5, 0.0, 0.0]])  # two means' raw outputs, two std outputs
+    squashed = Gaussian((-1.0, 0.0), (1.0, 4.0), min_std=1e-4)
+    free = Gaussian((-1.0, 0.0), (1.0, 4.0), min_std=1e-4, squash=False)
+    # centre + tanh(raw) * half-width, against centre + raw * half-width
+    np.testing.assert_allclose(squashed.mode(out)[0], [np.tanh(3.0), 2.0 + 2.0 * np.tanh(-0.5)])
+    np.testing.assert_allclose(free.mode(out)[0], [3.0, 1.0])
+    np.testing.assert_allclose(free.env_action(free.mode(out))[0], [1.0, 1.0])
+    # the log-probability is the raw sample's under the unbounded mean
+    log_prob, _ = free.log_prob_entropy(out, jnp.array([[3.0, 1.0]]))
+    _, std = free.mean_std(out)
+    expected = -np.log(np.asarray(std[0])).sum() - np.log(2 * np.pi)
+    np.testing.assert_allclose(log_prob[0], expected, rtol=1e-6)
+    config = AgentConfig(squash_mean=False, log_std_init=0.0)
+    learner = PPO(config, obs_size=2, action_spec=Box((-1.0, -1.0), (1.0, 1.0)))
+    assert learner.policy.squash is False
+
+
 def test_log_std_init_is_refused_for_discrete_actions():
     with pytest.raises(ValueError, match="log_std_init is for continuous actions"):
         validate(from_preset("paper", env="cartpole-v1", algo="ppo", agent={"log_std_init": 0.0}))
+    with pytest.raises(ValueError, match="squash_mean is for continuous actions"):
+        validate(from_preset("paper", env="cartpole-v1", algo="a2c", agent={"squash_mean": False}))
+
+
+def test_an_unknown_initialiser_is_refused():
+    with pytest.raises(ValueError, match="init must be one of normal, fan_in"):
+        validate(from_preset("paper", env="cartpole-v1", algo="a2c", agent={"init": "xavier"}))

@@ -49,3 +49,23 @@ def test_mlp_computes_and_differentiates_as_jax_does(inputs, hidden, out):
     for i in range(x.shape[0]):
         for a, b in zip(batched, jax.tree.leaves(looped(params, x[i])), strict=True):
             np.testing.assert_allclose(a[i], b, rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize("weight_init", ["normal", "fan_in"])
+def test_the_initialisers_give_their_spread_and_the_same_weights_under_jit(weight_init):
+    net = MLP(256, 6, "relu", 0.1, layers=2, weight_init=weight_init)
+    init = lambda key: net.init(key, jnp.zeros((1, 17)))
+    params = init(jax.random.key(0))
+    jitted = jax.jit(init)(jax.random.key(0))
+    for a, b in zip(jax.tree.leaves(params), jax.tree.leaves(jitted), strict=True):
+        np.testing.assert_array_equal(a, b)
+    kernels = [layer["kernel"] for layer in params["params"].values()]
+    assert [k.shape for k in kernels] == [(17, 256), (256, 256), (256, 6)]
+    for kernel in kernels:
+        if weight_init == "fan_in":  # PyTorch's nn.Linear: U(+-1/sqrt(fan_in)), std bound/sqrt(3)
+            bound = kernel.shape[0] ** -0.5
+            assert np.abs(kernel).max() <= bound and np.abs(kernel).max() > 0.95 * bound
+            np.testing.assert_allclose(kernel.std(), bound / np.sqrt(3), rtol=0.1)
+        else:
+            np.testing.assert_allclose(kernel.std(), 0.1, rtol=0.1)
+    assert all(not np.any(layer["bias"]) for layer in params["params"].values())

@@ -162,7 +162,8 @@ class Categorical:
 
 class Gaussian:
     """Diagonal Gaussian policy with the tutorial code's parametrisation: mean =
-    tanh(.) * bound (centred in the bounds), std = softplus(.) + `min_std`.
+    tanh(.) * bound (centred in the bounds; unsquashed, `.` * bound, under `squash` False),
+    std = softplus(.) + `min_std` (or exp of a learned log std).
 
     Actions are the raw samples `[..., d]`; the env and the model get them clipped to the
     bounds, and the log-probability is that of the raw sample (so PPO's ratio is exact).
@@ -176,12 +177,15 @@ class Gaussian:
         high: tuple[float, ...],
         min_std: float,
         log_std: bool = False,
+        squash: bool = True,
     ):
         self.low = jnp.asarray(low, jnp.float32)
         self.high = jnp.asarray(high, jnp.float32)
         self.min_std = min_std
         self.log_std = log_std
         """The std's half of the output is a log std (state-independent, `log_std_init`)."""
+        self.squash = squash
+        """The mean is tanh-squashed into the bounds (`AgentConfig.squash_mean`)."""
         self.size = len(low)
         self.out_size = 2 * self.size
         self.net_out_size = self.size if log_std else self.out_size
@@ -189,7 +193,8 @@ class Gaussian:
 
     def mean_std(self, out: Array) -> tuple[Array, Array]:
         centre, bound = (self.high + self.low) / 2, (self.high - self.low) / 2
-        mean = centre + jnp.tanh(out[..., : self.size]) * bound
+        raw = out[..., : self.size]
+        mean = centre + (jnp.tanh(raw) if self.squash else raw) * bound
         if self.log_std:
             return mean, jnp.exp(out[..., self.size :])
         std = jax.nn.softplus(out[..., self.size :]) + self.min_std
@@ -218,14 +223,14 @@ class Gaussian:
 
 
 def make_policy(
-    action_spec, min_std: float = 1e-4, log_std: bool = False
+    action_spec, min_std: float = 1e-4, log_std: bool = False, squash: bool = True
 ) -> Categorical | Gaussian:
     """The policy head for an env's `action_spec` (or a plain count of discrete actions)."""
     if isinstance(action_spec, int):
         return Categorical(action_spec)
     if action_spec.discrete:
         return Categorical(action_spec.size)
-    return Gaussian(tuple(action_spec.low), tuple(action_spec.high), min_std, log_std)
+    return Gaussian(tuple(action_spec.low), tuple(action_spec.high), min_std, log_std, squash)
 
 
 class ActorCritic:
@@ -244,9 +249,9 @@ class ActorCritic:
         self.obs_size = obs_size
         self.workers = workers
         log_std = config.log_std_init is not None
-        self.policy = make_policy(action_spec, config.min_std, log_std)
+        self.policy = make_policy(action_spec, config.min_std, log_std, config.squash_mean)
         mlp = lambda hidden, out: MLP(
-            hidden, out, config.activation, config.init_std, config.hidden_layers
+            hidden, out, config.activation, config.init_std, config.hidden_layers, config.init
         )
         out_size = getattr(self.policy, "net_out_size", self.policy.out_size)
         self.actor = mlp(config.actor_hidden, out_size)
