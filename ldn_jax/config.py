@@ -99,6 +99,9 @@ class AgentConfig:
     """RMSProp decay of the squared-gradient average (TensorFlow 1's default)."""
     rmsprop_eps: float = 1e-10
     """RMSProp epsilon (TensorFlow 1's default)."""
+    adam_eps: float = 1e-8
+    """PPO: Adam's epsilon (optax's and PyTorch's default; SB3's PPO uses 1e-5, which damps
+    the steps of weights whose gradients are smaller than about it)."""
     actor_hidden: int = 200
     """Hidden units of the actor's single hidden layer."""
     critic_hidden: int = 100
@@ -740,6 +743,7 @@ def validate(config: Config) -> Config:
             f"rmsprop_decay must be in [0, 1), got {agent.rmsprop_decay}",
         ),
         (agent.rmsprop_eps > 0, f"rmsprop_eps must be > 0, got {agent.rmsprop_eps}"),
+        (agent.adam_eps > 0, f"adam_eps must be > 0, got {agent.adam_eps}"),
         (agent.value_coef >= 0, f"value_coef must be >= 0, got {agent.value_coef}"),
         (model.hidden >= 1, f"model hidden must be >= 1, got {model.hidden}"),
         (model.init_std > 0, f"model init_std must be > 0, got {model.init_std}"),

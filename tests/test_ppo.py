@@ -283,3 +283,19 @@ def test_target_kl_stops_an_update_at_the_first_minibatch_past_it():
     assert not np.array_equal(first(stopped), first(state)) and not np.array_equal(
         first(stopped), first(full)
     )
+
+
+def test_adams_epsilon_damps_the_steps_of_small_gradients():
+    # Adam's step is lr * m / (sqrt(v) + eps): with eps far above every gradient a step is
+    # about lr * g / eps, tiny; at optax's 1e-8 every weight moves about lr.
+    segment = _segment(jax.random.key(0), n=8, workers=4)
+    moved = {}
+    for eps in (1e-8, 1e3):
+        agent = AgentConfig(epochs=1, minibatches=1, value_clip=None, adam_eps=eps)
+        learner = PPO(agent, obs_size=4, action_spec=2)
+        state = learner.init(jax.random.key(1))
+        new, _ = jax.jit(learner.update)(state, segment, jax.random.key(2))
+        change = jax.tree.map(lambda a, b: jnp.abs(a - b).max(), new.params, state.params)
+        moved[eps] = max(float(x) for x in jax.tree.leaves(change))
+    assert moved[1e-8] == pytest.approx(agent.actor_lr, rel=0.01)  # one Adam step: lr
+    assert moved[1e3] < 1e-3 * moved[1e-8]
