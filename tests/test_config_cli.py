@@ -199,11 +199,12 @@ def test_explain_lists_every_layer_that_sets_a_field_in_order(tmp_path):
     )
     assert lines[0] == "agent.actor_lr = 0.0001   (preset paper)"
     layers = [line.split()[0] for line in lines[1:]]
-    assert layers == ["default", "learner", "continuous", "--config", "--set"]
+    assert layers == ["default", "learner", "continuous", "task", "--config", "--set"]
     assert [line.split()[-1] for line in lines[1:]] == [
         "0.001",
         "0.00075",
         "0.0003",
+        "2.0633e-05",  # the zoo's HalfCheetah PPO
         "0.0005",
         "0.0001",
     ]
