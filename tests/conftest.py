@@ -1,4 +1,5 @@
-"""The order the test files are handed to the xdist workers (`make test`: `--dist loadfile`).
+"""The order the test files are handed to the xdist workers (`make test`: `--dist loadfile`),
+and the guard that keeps `optimized` tests out of the pass without XLA's optimisations.
 
 The files are handed out in collection order, so a heavy file collected late (test_paper.py's
 smoke fixture trains 14 runs, about 3.5 minutes) would leave one worker running it while the
@@ -6,6 +7,10 @@ other idles. The heaviest files go first; the rest keep their order.
 """
 
 from __future__ import annotations
+
+import os
+
+import pytest
 
 HEAVY_FIRST = ("test_paper.py", "test_train.py", "test_branched.py")
 
@@ -16,3 +21,11 @@ def pytest_collection_modifyitems(session, config, items):
         return HEAVY_FIRST.index(name) if name in HEAVY_FIRST else len(HEAVY_FIRST)
 
     items.sort(key=rank)  # stable: each file's tests keep their order
+
+
+def pytest_runtest_setup(item):
+    """A test marked `optimized` compares the bits of two different programs, which XLA's
+    optimisations decide: under JAX_DISABLE_MOST_OPTIMIZATIONS it would check another
+    compiler's bits (`make test` runs these in a second pass without it)."""
+    if item.get_closest_marker("optimized") and os.environ.get("JAX_DISABLE_MOST_OPTIMIZATIONS"):
+        pytest.fail("an `optimized` test needs XLA's optimisations: unset the variable")

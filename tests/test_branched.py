@@ -156,6 +156,7 @@ def branched_run(tmp_path_factory):
     return config, out, summary
 
 
+@pytest.mark.optimized
 def test_imagined_counts_are_the_played_weights_and_meet_the_ratio(branched_run):
     from ldn_jax.host.run_dir import RunDir
 
@@ -174,6 +175,7 @@ def test_imagined_counts_are_the_played_weights_and_meet_the_ratio(branched_run)
         assert int(final.imagined_steps[0, seed]) == mine[-1]["imagined_steps"]
 
 
+@pytest.mark.optimized
 def test_a_branched_run_resumes_to_the_uninterrupted_run_bitwise(branched_run, tmp_path):
     from ldn_jax.host.training import Interrupted
     from tests.test_resume import StopAfter, _lines
@@ -223,6 +225,7 @@ def test_macura_defaults_its_estimator_to_the_ensemble():
     assert config.model.ld == "ensemble" and config.stop_rule == "macura"
 
 
+@pytest.mark.optimized
 def test_a_branched_run_split_over_two_devices_is_the_one_device_run_bitwise(
     branched_run, tmp_path
 ):

@@ -146,6 +146,7 @@ def _rollout(env, params, key, steps=50):
     return jax.lax.scan(body, (state, obs), jax.random.split(key, steps))[1]
 
 
+@pytest.mark.optimized
 def test_vmap_equals_loop_and_jit_is_finite():
     env, params = envs.make("cartpole-v2")
     keys = jax.random.split(jax.random.key(7), 1024)

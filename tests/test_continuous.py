@@ -100,6 +100,7 @@ def test_masked_continuous_steps_change_nothing_bitwise():
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
 
 
+@pytest.mark.optimized
 def test_running_moments_equal_numpy_over_all_live_rows_in_any_batching():
     rng = np.random.default_rng(0)
     x = rng.normal(3.0, [0.5, 2.0, 10.0], size=(60, 3)).astype(np.float32)

@@ -107,6 +107,7 @@ def test_members_start_apart_and_m0_copies_them():
     assert float(state.error_scale) == 1.0
 
 
+@pytest.mark.optimized
 def test_vmapped_fit_equals_each_member_fitted_alone():
     members, updates = 3, 20
     ensemble = Dynamics(

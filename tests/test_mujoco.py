@@ -179,6 +179,7 @@ def test_native_reset_and_vmapped_rollout(task):
     assert out["next_obs"][:, :, -1].reshape(12, -1).std(0).max() > 1e-3  # envs differ
 
 
+@pytest.mark.optimized
 def test_native_vmapped_equals_looped():
     """The same resets and actions (made outside the programs) through one vmapped program and
     through one env at a time: equal to the bit."""

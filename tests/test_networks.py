@@ -9,6 +9,9 @@ import pytest
 
 from ldn_jax.networks import MLP
 
+# bit-equality between different programs: XLA's rewrites decide the bits (conftest.py)
+pytestmark = pytest.mark.optimized
+
 
 class JaxMLP(nn.Module):
     """`MLP` with `nn.Dense`'s own `dot_general`, differentiated by JAX."""

@@ -113,6 +113,7 @@ def test_two_devices_give_the_one_device_run(reference, tmp_path):
         assert load_policy(out, seed=seed, k=2.0)(obs) == load_policy(reference, seed, k=2.0)(obs)
 
 
+@pytest.mark.optimized
 @pytest.mark.parametrize(  # 2 seeds per device; 1, run twice (slow: the default suite's time)
     "devices", [2, pytest.param(4, marks=pytest.mark.slow)]
 )

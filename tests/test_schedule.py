@@ -134,6 +134,7 @@ def reference(tmp_path_factory):
     return out, summary
 
 
+@pytest.mark.optimized
 def test_resume_equals_the_uninterrupted_run_bitwise(reference, tmp_path):
     ref_dir, ref_summary = reference
     with pytest.raises(Interrupted):
@@ -157,6 +158,7 @@ def test_resume_equals_the_uninterrupted_run_bitwise(reference, tmp_path):
     assert len(lines) == 2 * 2 * 8  # K x seeds x iterations: a steps budget is exact
 
 
+@pytest.mark.optimized
 def test_two_devices_give_the_one_device_run_to_the_bit(reference, tmp_path):
     out = tmp_path / "two"
     args = [*ARGS, "--devices", "2", "--bitwise", "--compile-cache", "none", "--out", str(out)]

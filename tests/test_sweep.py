@@ -41,6 +41,7 @@ SLOW = pytest.mark.slow
 PPO_GRID = (("agent.actor_lr", (7.5e-4, 3e-3)),)
 
 
+@pytest.mark.optimized
 @pytest.mark.parametrize(
     ("algo", "grid", "agent", "singles"),
     [

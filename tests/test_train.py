@@ -287,6 +287,7 @@ def test_same_seed_gives_bitwise_identical_metrics(algo):
             np.testing.assert_array_equal(m1[name], m2[name], err_msg=name)
 
 
+@pytest.mark.optimized
 def test_vmapped_seeds_equal_seeds_run_one_by_one():
     # Equal to float32 rounding, not bitwise: XLA's CPU kernels for batched (vmapped) matmuls
     # round differently in the last bits from unbatched ones (checked 2026-11-22).
