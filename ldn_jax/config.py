@@ -20,8 +20,10 @@ from ldn_jax.envs.mujoco import BACKEND_CHOICES
 from ldn_jax.presets import Layer
 
 ACTIVATIONS = tuple(networks.ACTIVATIONS)
-INITS = tuple(networks.INITS)
 """Hidden activations the networks know (`ldn_jax.networks` owns them)."""
+
+INITS = tuple(networks.INITS)
+"""Weight initialisers of actor and critic (`AgentConfig.init`)."""
 
 IMAGINE_MODES = ("episodes", "memory", "batch")
 """How the imagined stage feeds the learner (`ModelConfig.imagine`)."""
