@@ -16,11 +16,8 @@ run: $(STAMP)
 	$(PY) experiments/run.py
 
 # Both cores: a test file per worker (module fixtures are built once, as without xdist).
-# The default suite is compile-bound (tiny budgets): it compiles without XLA's optimisations,
-# except the tests that compare the bits of two different programs (marked `optimized`).
 test: $(STAMP)
-	JAX_DISABLE_MOST_OPTIMIZATIONS=1 $(PY) -m pytest -q -m "not slow and not optimized" -n 2 --dist loadfile
-	$(PY) -m pytest -q -m "optimized and not slow" -n 2 --dist loadfile
+	$(PY) -m pytest -q -m "not slow" -n 2 --dist loadfile
 
 test-slow: $(STAMP)
 	$(PY) -m pytest -q -m "slow"
