@@ -8,7 +8,6 @@ LD stop) carry weight 0 into every loss and statistic, so they change nothing.
 
 from __future__ import annotations
 
-import functools
 import math
 
 import jax
@@ -94,12 +93,14 @@ class PPO(ActorCritic):
 
     def __init__(self, config: AgentConfig, obs_size: int, action_spec, workers: int = 1):
         super().__init__(config, obs_size, action_spec, workers)
-        # The learning rates are injected (arrays in the optimiser state, so a sweep can vary
-        # them); eps is bound beforehand, so the state keeps its shape.
-        adam = optax.inject_hyperparams(functools.partial(optax.adam, eps=config.adam_eps))
+
+        # Injected hyperparameters are arrays in the optimiser state, so a sweep can vary them.
+        def adam(lr):
+            return optax.inject_hyperparams(optax.adam)(learning_rate=lr, eps=config.adam_eps)
+
         self.optimizer = optax.chain(
             optax.clip_by_global_norm(config.max_grad_norm),
-            self.per_net(adam(learning_rate=config.actor_lr), adam(learning_rate=config.critic_lr)),
+            self.per_net(adam(config.actor_lr), adam(config.critic_lr)),
         )
 
     def batch(self, params: dict, segment: Segment) -> Batch:
