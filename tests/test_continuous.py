@@ -236,8 +236,19 @@ def test_a_saved_policy_standardises_observations_with_its_own_statistics(tmp_pa
 def test_locomotion_ppo_scales_rewards_and_standardises_observations():
     for env in ("halfcheetah", "hopper", "walker2d", "ant"):
         agent = from_preset("paper", env=env, algo="ppo-ldn").agent
-        assert agent.normalize_obs and agent.reward_scale == 0.1
+        assert agent.normalize_obs
         assert not from_preset("paper", env=env, algo="ldn").agent.normalize_obs
+    agent = from_preset("paper", env="halfcheetah", algo="ppo").agent
+    assert agent.reward_scale == 0.1 and not agent.normalize_reward
+    for env in (
+        "hopper",
+        "walker2d",
+        "ant",
+    ):  # Baselines' MuJoCo PPO: rewards over the return's std
+        config = from_preset("paper", env=env, algo="ppo-model")
+        assert config.agent.normalize_reward and config.agent.reward_scale == 1.0
+        assert config.schedule == "steps" and config.steps_per_iteration == config.agent.n_steps
+        assert (config.agent.hidden_layers, config.agent.actor_hidden) == (2, 64)
     for env in ("inverted_pendulum", "reacher", "cartpole-v1"):
         agent = from_preset("paper", env=env, algo="ppo").agent
         assert not agent.normalize_obs and agent.reward_scale == 1.0

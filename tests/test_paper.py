@@ -437,20 +437,24 @@ def test_the_cpu_full_scale_runs_every_mujoco_table_at_1m_steps_with_5_seeds():
     assert cartpole == common.run_config(common.SCALES["cpu"], "cartpole-v2", "ldn")
 
 
-def test_the_locomotion_study_states_each_tasks_ratio_to_the_zoo():
+def test_the_locomotion_study_states_each_tasks_ratio_to_the_zoo(tmp_path):
     from experiments.paper import locomotion
 
     hopper = {"env": "hopper", "seeds": 2, "steps": 1_000_000, "zoo": 2410.0, "ratio": 0.5}
     hopper |= {"final_moving_return": [1000.0, 1200.0], "eval_return": [1205.0, 1205.0]}
     ant = {**hopper, "env": "ant", "zoo": 1327.0, "ratio": 1.1, "eval_return": [1460.0, 1460.0]}
-    text = locomotion.section([hopper | {"wall_seconds": 300.0}, ant | {"wall_seconds": 900.0}])
+    hopper["curve"] = {"env_steps": [0, 500_000], "moving_return": [[0.0, 1000.0], [0.0, 1200.0]]}
+    rows = [hopper | {"wall_seconds": 300.0}, ant | {"wall_seconds": 900.0}]
+    text = locomotion.section(rows)
     assert (
         "| hopper | 1,000,000 | 2 |" in text and "| 1,205, 1,205 | 2,410 | 0.50 | 0 | 300 |" in text
     )
     assert (
         "At the zoo's figure or above: ant (1 of 2 tasks). Not measured yet: halfcheetah, "
-        "walker2d." in text
+        "walker2d. Not in the figure (its curve was not kept): ant." in text
     )
+    locomotion.curves(rows, tmp_path / "curves.png")  # from the kept curves, without the runs
+    assert (tmp_path / "curves.png").stat().st_size > 0
     config = locomotion.config_of("walker2d", 5)
     assert (config.algo, config.seeds, config.steps) == ("ppo", 5, 1_000_000)
 

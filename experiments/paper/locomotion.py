@@ -21,6 +21,8 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from experiments.paper import common
 from ldn_jax.config import from_preset, validate
 from ldn_jax.host import stats
@@ -51,6 +53,22 @@ def row_of(env: str, out: Path, summary: dict) -> dict:
         "ratio": greedy["iqm"] / ZOO[env],
         "wall_seconds": summary["train_seconds"] + summary["compile_seconds"],
         "diverged": sum(bool(r["diverged"]) for r in runs),
+        "curve": _curve(history),
+    }
+
+
+CURVE_POINTS = 100
+"""Iterations kept of each row's curve in locomotion.json, so that the figure can be drawn
+again without the runs (they are not kept in git)."""
+
+
+def _curve(history: dict) -> dict:
+    """Every seed's moving return and the mean env steps, at `CURVE_POINTS` iterations."""
+    moving, steps = history["moving_return"][0], history["env_steps"][0].mean(axis=0)
+    keep = np.unique(np.linspace(0, steps.shape[0] - 1, CURVE_POINTS).round().astype(int))
+    return {
+        "env_steps": [round(float(x)) for x in steps[keep]],
+        "moving_return": [[round(float(x), 1) for x in seed[keep]] for seed in moving],
     }
 
 
@@ -82,31 +100,38 @@ def section(rows: list[dict]) -> str:
         )
     met = [r["env"] for r in rows if r["ratio"] >= 1.0]
     missing = [env for env in ZOO if env not in {r["env"] for r in rows}]
+    uncurved = [r["env"] for r in rows if "curve" not in r]
     lines += [
         "",
         f"At the zoo's figure or above: {', '.join(met) if met else 'none'} "
         f"({len(met)} of {len(rows)} tasks)."
-        + (f" Not measured yet: {', '.join(missing)}." if missing else ""),
+        + (f" Not measured yet: {', '.join(missing)}." if missing else "")
+        + (
+            f" Not in the figure (its curve was not kept): {', '.join(uncurved)}."
+            if uncurved
+            else ""
+        ),
         "",
     ]
     return "\n".join(lines)
 
 
-def curves(runs: dict[str, Path], path: Path) -> None:
-    """One panel per task run this time: moving return (mean, 95% band over seeds) against
+def curves(rows: list[dict], path: Path) -> None:
+    """One panel per row with a curve: moving return (mean, 95% band over seeds) against
     real env steps, with the zoo's figure dashed."""
     import matplotlib.pyplot as plt
     from matplotlib.ticker import FuncFormatter
 
     from ldn_jax.host.plots import band_panel
 
-    if not runs:
+    rows = [r for r in rows if "curve" in r]
+    if not rows:
         return
-    fig, axes = plt.subplots(1, len(runs), figsize=(4.4 * len(runs), 3.5), dpi=110, squeeze=False)
-    for ax, (env, out) in zip(axes[0], runs.items(), strict=True):
-        history = common.load_history(out)
-        moving = history["moving_return"][0]
-        steps = history["env_steps"][0].mean(axis=0)
+    fig, axes = plt.subplots(1, len(rows), figsize=(4.4 * len(rows), 3.5), dpi=110, squeeze=False)
+    for ax, row in zip(axes[0], rows, strict=True):
+        steps = np.asarray(row["curve"]["env_steps"], float)
+        moving = np.asarray(row["curve"]["moving_return"], float)
+        env = row["env"]
         band_panel(ax, {"ppo": (steps, moving)}, env, ZOO[env], "zoo PPO at 1M", legend_size=7)
         ax.set_xlabel("real env steps (mean over seeds)")
         ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1000:,.0f}k"))
@@ -137,14 +162,13 @@ def main(argv: list[str] | None = None) -> int:
         summary = common.ensure_run(config_of(env, args.seeds), run)
         rows[env] = row_of(env, run, summary)
     ordered = [rows[env] for env in ZOO if env in rows]
-    common.write_json(record, {"machine": common.machine(), "rows": ordered})
     (out / "locomotion.md").write_text(section(ordered))
-    # The curves of every row whose run is at hand (runs are not kept in git).
-    at_hand = {r["env"]: _run_dir(args.results, r["env"], r["seeds"]) for r in ordered}
-    curves(
-        {env: d for env, d in at_hand.items() if (d / "summary.json").exists()},
-        out / "locomotion.png",
-    )
+    for row in ordered:  # a row recorded before rows kept their curve: from its run, if at hand
+        run = _run_dir(args.results, row["env"], row["seeds"])
+        if "curve" not in row and (run / "summary.json").exists():
+            row["curve"] = _curve(common.load_history(run))
+    common.write_json(record, {"machine": common.machine(), "rows": ordered})
+    curves(ordered, out / "locomotion.png")
     print(f"wrote {out}/locomotion.json, locomotion.md and locomotion.png")
     return 0
 
