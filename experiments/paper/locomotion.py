@@ -157,20 +157,23 @@ def main(argv: list[str] | None = None) -> int:
     out = common.out_dir(args.results, "locomotion")
     record = out / "locomotion.json"
     rows = {r["env"]: r for r in json.loads(record.read_text())["rows"]} if record.exists() else {}
-    for env in envs:
+    for env in envs:  # the files after each task, so a stopped study keeps what it finished
         run = _run_dir(args.results, env, args.seeds)
         summary = common.ensure_run(config_of(env, args.seeds), run)
         rows[env] = row_of(env, run, summary)
-    ordered = [rows[env] for env in ZOO if env in rows]
-    (out / "locomotion.md").write_text(section(ordered))
-    for row in ordered:  # a row recorded before rows kept their curve: from its run, if at hand
-        run = _run_dir(args.results, row["env"], row["seeds"])
-        if "curve" not in row and (run / "summary.json").exists():
-            row["curve"] = _curve(common.load_history(run))
-    common.write_json(record, {"machine": common.machine(), "rows": ordered})
-    curves(ordered, out / "locomotion.png")
+        _write(out, record, [rows[env] for env in ZOO if env in rows], args.results)
     print(f"wrote {out}/locomotion.json, locomotion.md and locomotion.png")
     return 0
+
+
+def _write(out: Path, record: Path, rows: list[dict], results: Path) -> None:
+    for row in rows:  # a row recorded before rows kept their curve: from its run, if at hand
+        run = _run_dir(results, row["env"], row["seeds"])
+        if "curve" not in row and (run / "summary.json").exists():
+            row["curve"] = _curve(common.load_history(run))
+    (out / "locomotion.md").write_text(section(rows))
+    common.write_json(record, {"machine": common.machine(), "rows": rows})
+    curves(rows, out / "locomotion.png")
 
 
 if __name__ == "__main__":
