@@ -1,0 +1,74 @@
+"""SB3's PPO with rl-baselines3-zoo's constants, for side-by-side runs with ours.
+
+    SB3_PYTHON sb3_ppo.py TASK SEED STEPS     (TASK: halfcheetah or hopper)
+
+Not part of the package, and not run by the tests: it needs torch, stable-baselines3 and
+gymnasium[mujoco] in an interpreter of their own (`python -m venv V && V/bin/pip install torch
+stable-baselines3 "gymnasium[mujoco]"`). Trains one seed on gymnasium's v5 task with the zoo's
+VecNormalize (observations and rewards), then plays 5 greedy episodes (env seeds 100-104) and
+prints one JSON line: task, seed, steps, training seconds, the greedy returns and their mean.
+docs/benchmarks.md sets its figures beside `ldn-jax eval` of our runs.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+
+import gymnasium as gym
+import numpy as np
+import torch
+from stable_baselines3 import PPO
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import VecNormalize
+
+# rl-baselines3-zoo's hyperparams/ppo.yml (HalfCheetah-v3, Hopper-v3), 1 env each.
+ZOO = {
+    "halfcheetah": (
+        "HalfCheetah-v5",
+        dict(batch_size=64, n_steps=512, gamma=0.98, learning_rate=2.0633e-05,
+             ent_coef=0.000401762, clip_range=0.1, n_epochs=20, gae_lambda=0.92,
+             max_grad_norm=0.8, vf_coef=0.58096),
+    ),
+    "hopper": (
+        "Hopper-v5",
+        dict(batch_size=32, n_steps=512, gamma=0.999, learning_rate=9.80828e-05,
+             ent_coef=0.00229519, clip_range=0.2, n_epochs=5, gae_lambda=0.99,
+             max_grad_norm=0.7, vf_coef=0.835671),
+    ),
+}  # fmt: skip
+
+
+def main() -> None:
+    task, seed, steps = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+    env_id, constants = ZOO[task]
+    torch.set_num_threads(1)
+    env = VecNormalize(make_vec_env(env_id, n_envs=1, seed=seed), gamma=constants["gamma"])
+    policy = dict(
+        log_std_init=-2,
+        ortho_init=False,
+        activation_fn=torch.nn.ReLU,
+        net_arch=dict(pi=[256, 256], vf=[256, 256]),
+    )
+    model = PPO("MlpPolicy", env, seed=seed, verbose=0, policy_kwargs=policy, **constants)
+    start = time.time()
+    model.learn(steps)
+    seconds = time.time() - start
+    env.training, env.norm_reward = False, False
+    play, returns = gym.make(env_id), []
+    for episode in range(5):
+        obs, _ = play.reset(seed=100 + episode)
+        done, total = False, 0.0
+        while not done:
+            action, _ = model.predict(env.normalize_obs(obs[None]), deterministic=True)
+            obs, reward, terminated, truncated, _ = play.step(action[0])
+            total, done = total + float(reward), terminated or truncated
+        returns.append(total)
+    print(json.dumps({"task": task, "seed": seed, "steps": steps, "train_seconds": round(seconds),
+                      "returns": [round(r, 1) for r in returns],
+                      "mean": round(float(np.mean(returns)), 1)}))  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
