@@ -172,6 +172,10 @@ PRESETS: dict[str, dict] = {
 """Each preset: fields by dotted name, with optional `"learners"` (learner -> fields) and
 `"envs"` (env -> fields) entries applied after it."""
 
+# hopper's, walker2d's and ant's PPO under the branched preset: one 256-step rollout per
+# iteration (`_MUJOCO_PPO`), the A2C family 100 steps.
+_ONE_MUJOCO_ROLLOUT = {"iteration_steps": 100, "learners": {"ppo": {"iteration_steps": 256}}}
+
 PRESETS["branched"] = {
     # Ours: imagination branched from real states in a probabilistic ensemble (docs/training.md,
     # "Branched imagination"; the measurements that chose it: docs/benchmarks.md).
@@ -202,10 +206,9 @@ PRESETS["branched"] = {
             "iteration_steps": 100,
             "learners": {"ppo": {"iteration_steps": 128}},
         },
-        # hopper's, walker2d's and ant's PPO: one 256-step rollout per iteration.
-        "hopper": {"iteration_steps": 100, "learners": {"ppo": {"iteration_steps": 256}}},
-        "walker2d": {"iteration_steps": 100, "learners": {"ppo": {"iteration_steps": 256}}},
-        "ant": {"iteration_steps": 100, "learners": {"ppo": {"iteration_steps": 256}}},
+        "hopper": _ONE_MUJOCO_ROLLOUT,
+        "walker2d": _ONE_MUJOCO_ROLLOUT,
+        "ant": _ONE_MUJOCO_ROLLOUT,
         "reacher": {"iteration_steps": 100},
     },
 }

@@ -240,11 +240,8 @@ def test_locomotion_ppo_scales_rewards_and_standardises_observations():
         assert not from_preset("paper", env=env, algo="ldn").agent.normalize_obs
     agent = from_preset("paper", env="halfcheetah", algo="ppo").agent
     assert agent.reward_scale == 0.1 and not agent.normalize_reward
-    for env in (
-        "hopper",
-        "walker2d",
-        "ant",
-    ):  # Baselines' MuJoCo PPO: rewards over the return's std
+    # Baselines' MuJoCo PPO: rewards over the return's std, one rollout per iteration.
+    for env in ("hopper", "walker2d", "ant"):
         config = from_preset("paper", env=env, algo="ppo-model")
         assert config.agent.normalize_reward and config.agent.reward_scale == 1.0
         assert config.schedule == "steps" and config.steps_per_iteration == config.agent.n_steps
