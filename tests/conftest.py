@@ -4,13 +4,40 @@ and the guard that fails an `optimized` test run without XLA's optimisations.
 The files are handed out in collection order, so a heavy file collected late (test_paper.py's
 smoke fixture trains 14 runs, about 3.5 minutes) would leave one worker running it while the
 other idles. The heaviest files go first; the rest keep their order.
+
+The whole session shares one persistent compilation cache (a temporary directory, set before
+any test imports JAX and inherited by the xdist workers and the commands tests start), so a
+program that several tests compile is compiled once: many tests train the same tiny configs.
+A command given `--compile-cache DIR` uses its own directory as before.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
 
 import pytest
+
+CACHE_VARIABLES = {
+    "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0",
+    "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES": "-1",
+}
+
+
+def pytest_configure(config):
+    if hasattr(config, "workerinput") or "JAX_COMPILATION_CACHE_DIR" in os.environ:
+        return  # an xdist worker (it inherits the controller's), or a cache set by the caller
+    config._session_cache = tempfile.mkdtemp(prefix="ldn-jax-test-cache-")
+    os.environ.update({"JAX_COMPILATION_CACHE_DIR": config._session_cache, **CACHE_VARIABLES})
+
+
+def pytest_unconfigure(config):
+    path = getattr(config, "_session_cache", None)
+    if path:
+        shutil.rmtree(path, ignore_errors=True)
+        os.environ.pop("JAX_COMPILATION_CACHE_DIR", None)
+
 
 HEAVY_FIRST = ("test_paper.py", "test_train.py", "test_branched.py")
 

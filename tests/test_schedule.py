@@ -158,6 +158,7 @@ def test_resume_equals_the_uninterrupted_run_bitwise(reference, tmp_path):
     assert len(lines) == 2 * 2 * 8  # K x seeds x iterations: a steps budget is exact
 
 
+@pytest.mark.slow  # the default suite splits a schedule "steps" run in test_branched.py
 @pytest.mark.optimized
 def test_two_devices_give_the_one_device_run_to_the_bit(reference, tmp_path):
     out = tmp_path / "two"
