@@ -29,6 +29,7 @@ IMAGINE_MODES = ("episodes", "memory", "batch")
 """How the imagined stage feeds the learner (`ModelConfig.imagine`)."""
 
 IMAGINE_STARTS = ("initial", "real")
+IMAGINED_STD = ("learn", "real")
 """Where imagined rollouts start (`ModelConfig.imagine_start`): a fresh initial state (the
 paper's), or a state of the real buffer (branched, ours in the style of MBPO)."""
 
@@ -274,6 +275,12 @@ class ModelConfig:
     """`imagine_start` "real": the share of real rows in each update on imagined ones, in
     [0, 1): beside the `branches` imagined rollouts the learner gets the nearest whole
     number of n-step windows of this iteration's real play (MBPO mixes in 5%)."""
+    imagined_std: str = "learn"
+    """`imagine_start` "real", for a policy with a state-independent log std
+    (`AgentConfig.log_std_init`), one of `IMAGINED_STD`. "learn": the updates on imagined
+    rows move the log std like every other parameter. "real": they leave it (and its
+    optimiser moments) as it was, so the policy's spread is set by the real updates alone;
+    imagined updates can otherwise shrink it far faster than real ones do (docs/training.md)."""
     probabilistic: bool = False
     """Each member of the ensemble (`ld` "ensemble" or "variance") outputs a Gaussian over
     the standardised next observation and reward, fitted by negative log-likelihood with
@@ -805,6 +812,16 @@ def validate(config: Config) -> Config:
             or config.algorithm.uses_model,
             f"imagine_start 'real' branches imagined rollouts, and {config.algo} imagines "
             "none; use a model-based algorithm (-model or -ldn)",
+        ),
+        (
+            model.imagined_std in IMAGINED_STD,
+            f"unknown imagined_std {model.imagined_std!r}; valid: {', '.join(IMAGINED_STD)}",
+        ),
+        (
+            model.imagined_std == "learn"
+            or (model.imagine_start == "real" and config.agent.log_std_init is not None),
+            "imagined_std 'real' needs branched imagination (imagine_start 'real') and a "
+            "policy with a state-independent log std (agent.log_std_init)",
         ),
         (model.imagined_ratio > 0, f"imagined_ratio must be > 0, got {model.imagined_ratio}"),
         (0 <= model.real_share < 1, f"real_share must be in [0, 1), got {model.real_share}"),

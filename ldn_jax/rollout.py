@@ -60,6 +60,9 @@ class Player:
     horizon: Any = None
     """A cut below `max_steps` that may be a traced int (MBPO's schedule): an episode still
     running after this many steps is truncated; None: `max_steps` alone."""
+    keep: tuple[str, ...] = ()
+    """Parameters the updates leave as they were, with their optimiser state (the names of
+    top-level entries of the learner's params, e.g. "log_std")."""
     mix: Callable[[Array, Segment], Segment] | None = None
     """`mix(key, segment) -> segment`: what the learner learns from instead of each played
     segment `[n, W]` (branched imagination adds real rows beside the imagined ones); the
@@ -190,9 +193,21 @@ def _segment_fn(
             k_update, k_mix = jax.random.split(k_update)
             learned = mix(k_mix, transitions)
         learner_state, losses = learner.update(carry.learner, learned, k_update)
+        if player.keep:
+            learner_state = keep_leaves(learner_state, carry.learner, player.keep)
         return carry.replace(learner=learner_state), (transitions, extras, losses)
 
     return segment
+
+
+def keep_leaves(new: Any, old: Any, names: tuple[str, ...]) -> Any:
+    """`new` with every leaf found under a dict key in `names` taken from `old`: a parameter
+    and, in the optimiser's state, its moments."""
+
+    def pick(path, fresh, kept):
+        return kept if any(getattr(k, "key", None) in names for k in path) else fresh
+
+    return jax.tree_util.tree_map_with_path(pick, new, old)
 
 
 def play_episodes(

@@ -323,6 +323,7 @@ class Trainer:
             world,
             self.max_steps,
             horizon=horizon,
+            keep=("log_std",) if config.imagined_std == "real" else (),
             mix=self._real_rows(real.steps, real.lengths),
         )
         rows = jnp.ceil(config.imagined_ratio * played)

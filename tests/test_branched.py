@@ -212,6 +212,13 @@ def _build(*argv):
         (["--algo", "ldn", "--set", "model.probabilistic=true"], "set ld 'ensemble' or 'variance'"),
         (["--algo", "ldn", "--ld", "ensemble", "--set", "model.elites=9"], "elites must be in [1,"),
         (["--algo", "ldn", "--set", "model.branches=0"], "branches must be >= 1"),
+        (["--algo", "ldn", "--set", "model.imagined_std=fixed"], "unknown imagined_std 'fixed'"),
+        (["--algo", "ppo-model", "--set", "model.imagined_std=real"], "needs branched imagination"),
+        (
+            ["--algo", "ppo-model", "--preset", "branched", "--env", "cartpole-v1",
+             "--set", "model.imagined_std=real"],
+            "a state-independent log std",
+        ),
     ],
 )  # fmt: skip
 def test_bad_branched_settings_are_one_line(argv, needle):

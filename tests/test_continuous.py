@@ -347,3 +347,44 @@ def test_log_std_init_is_refused_for_discrete_actions():
 def test_an_unknown_initialiser_is_refused():
     with pytest.raises(ValueError, match="init must be one of normal, fan_in"):
         validate(from_preset("paper", env="cartpole-v1", algo="a2c", agent={"init": "xavier"}))
+
+
+def test_kept_leaves_leave_the_log_std_and_its_adam_moments_as_they_were():
+    """Branched imagination's `model.imagined_std` "real": an update on imagined rows moves
+    every parameter but the log std, whose value and optimiser moments stay the old ones."""
+    from ldn_jax.rollout import keep_leaves
+
+    agent = from_preset("paper", algo="ppo", agent={"log_std_init": 0.0, "actor_lr": 1e-2}).agent
+    learner = PPO(agent, obs_size=2, action_spec=Box((-1.0,), (1.0,)))
+    update = jax.jit(learner.update)
+    state, _ = update(
+        learner.init(jax.random.key(0)), _bandit_segment(jax.random.key(1)), jax.random.key(4)
+    )
+    moved, _ = update(state, _bandit_segment(jax.random.key(2)), jax.random.key(3))
+    kept = keep_leaves(moved, state, ("log_std",))
+
+    def leaves(tree, name, but="none"):
+        """The leaves under a dict key `name` and not under `but` (optax's multi_transform
+        files the log std's moments under the label "actor" too)."""
+        found = []
+
+        def visit(path, x):
+            keys = [getattr(k, "key", None) for k in path]
+            if name in keys and but not in keys:
+                found.append(np.asarray(x))
+
+        jax.tree_util.tree_map_with_path(visit, tree)
+        return found
+
+    # The log std and its moments (in the params and in Adam's mu and nu) are the old ones,
+    # and the update did move them, so the test can tell.
+    old, new, back = (leaves(s, "log_std") for s in (state, moved, kept))
+    assert len(old) >= 3
+    assert any(not np.array_equal(a, b) for a, b in zip(old, new, strict=True))
+    for a, b in zip(old, back, strict=True):
+        np.testing.assert_array_equal(a, b)
+    # Everything else is the update's.
+    actor = lambda tree: leaves(tree, "actor", but="log_std")
+    for a, b in zip(actor(moved), actor(kept), strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert any(not np.array_equal(a, b) for a, b in zip(actor(state), actor(kept), strict=True))
