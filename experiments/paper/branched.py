@@ -7,8 +7,9 @@ Under the `branched` preset (short imagined rollouts from real states in a proba
 ensemble, `docs/training.md`), every rule that can end a branch, side by side with the PPO
 learner alone at the same constants: no rule under fixed caps of 1, 5 and 15 steps, MBPO's
 horizon schedule, the LD draw (disagreement and predicted-variance readings) under a cap of
-15, M2AC's mask and MACURA's threshold under the same cap. Per rule and env: IQM [95%
-interval] of the final moving return and of the greedy return after training,
+15, M2AC's mask and MACURA's threshold under the same cap; and the cap of 5 with the
+policy's log std left to the real updates (`model.imagined_std` "real", not a rule). Per rule
+and env: IQM [95% interval] of the final moving return and of the greedy return after training,
 P(improvement) of the greedy return over PPO and over the best fixed cap, imagined steps per
 real step, and training seconds.
 
@@ -56,10 +57,18 @@ RULES = {
     "ld-variance": ("ppo-ldn", {"ld": "variance", "horizon": 15}, "LD draw, variance, cap 15"),
     "m2ac": ("ppo-model", {"stop": "m2ac", "horizon": 15}, "M2AC mask, cap 15"),
     "macura": ("ppo-model", {"stop": "macura", "horizon": 15}, "MACURA threshold, cap 15"),
+    "std-real": (
+        "ppo-model",
+        {"horizon": 5, "imagined_std": "real"},
+        "no rule, cut at 5 steps, log std from real updates only",
+    ),
 }
 """Rule -> (algorithm, model fields over the preset's, how the report names it)."""
 
 CAPS = ("cap-1", "cap-5", "cap-15")
+
+ONLY = {"std-real": ("hopper", "halfcheetah")}
+"""Rules run on some envs only: inverted_pendulum's PPO has a state-dependent std."""
 
 
 def config_of(env: str, rule: str, seeds: int, steps: int):
@@ -201,6 +210,8 @@ def main(argv: list[str] | None = None) -> int:
     for env in args.envs.split(","):
         steps = args.steps or BUDGETS[env]
         for rule in args.rules.split(","):
+            if env not in ONLY.get(rule, (env,)):
+                continue
             config = config_of(env, rule, args.seeds, steps)
             run = args.results / "runs" / "branched" / f"{env}-{rule}-s{args.seeds}-{steps}"
             summary = common.ensure_run(config, run)
