@@ -294,6 +294,11 @@ def main() -> None:
         help="section seeds: the vmapped seed counts, e.g. 10,100 (default 10,100,1000; "
         "--quick 10,100)",
     )
+    parser.add_argument(
+        "--mjx-counts",
+        type=lambda text: tuple(int(v) for v in text.split(",")),
+        help="section mjx: the vmapped seed counts (default 10,100,1000; --quick 1)",
+    )
     parser.add_argument("--probe", metavar="CACHE", help=argparse.SUPPRESS)
     parser.add_argument("--probe-shape", default="10x3", help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -344,6 +349,8 @@ def main() -> None:
         result["sweep"] = sweep_vs_separate(**size)
     if "mjx" in sections:
         size = dict(counts=(1,), seconds=5.0) if args.quick else {}
+        if args.mjx_counts:
+            size["counts"] = args.mjx_counts
         result["mjx_halfcheetah"] = seed_counts_mjx(**size)
     if "mujoco" in sections:
         result["mujoco"] = mujoco_section(args.quick, args.brax_python)

@@ -29,9 +29,12 @@ IMAGINE_MODES = ("episodes", "memory", "batch")
 """How the imagined stage feeds the learner (`ModelConfig.imagine`)."""
 
 IMAGINE_STARTS = ("initial", "real")
-IMAGINED_STD = ("learn", "real")
 """Where imagined rollouts start (`ModelConfig.imagine_start`): a fresh initial state (the
 paper's), or a state of the real buffer (branched, ours in the style of MBPO)."""
+
+IMAGINED_STD = ("learn", "real")
+"""What branched imagination's updates do to a state-independent log std
+(`ModelConfig.imagined_std`)."""
 
 SCHEDULES = ("episodes", "steps")
 """What one iteration of real play is (`Config.schedule`)."""
@@ -280,7 +283,10 @@ class ModelConfig:
     (`AgentConfig.log_std_init`), one of `IMAGINED_STD`. "learn": the updates on imagined
     rows move the log std like every other parameter. "real": they leave it (and its
     optimiser moments) as it was, so the policy's spread is set by the real updates alone;
-    imagined updates can otherwise shrink it far faster than real ones do (docs/training.md)."""
+    imagined updates can otherwise shrink it far faster than real ones do (docs/training.md).
+    Two things still see the imagined updates: the step count of the actor's Adam, which
+    the log std shares (its bias correction fades a little sooner), and the actor's
+    gradient-norm clip, which includes the log std's gradient."""
     probabilistic: bool = False
     """Each member of the ensemble (`ld` "ensemble" or "variance") outputs a Gaussian over
     the standardised next observation and reward, fitted by negative log-likelihood with
