@@ -1,0 +1,130 @@
+"""How wrong a finished run's model is on the branches it imagines: from states of the run's
+own real buffer, each seed's model plays H steps with the run's policy, and the true env is
+stepped from the same states with the same actions.
+
+    python -m experiments.model_error RUN_DIR [--steps H] [--starts N] [--recent N]
+
+For halfcheetah, hopper and walker2d (their observation is the physics state without the x
+position, so the true env can be put in an imagined state; hopper's and walker2d's clipped
+velocities make that exact only below 10). Per seed and imagined step t, means over the
+starts of:
+- one-step errors (the true env stepped from the model's own state at t): observation error
+  in units of the buffer's per-dimension std, absolute reward error, how often the
+  termination test disagrees;
+- open-loop errors (the true env run from the same start through the same actions): the
+  compounding observation and reward error.
+Writes model_error.json into RUN_DIR.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+
+from experiments.paper.shadow import load_run
+from ldn_jax.envs.mujoco import EnvState, _nv, _qpos0, engine
+
+TASKS = ("halfcheetah", "hopper", "walker2d")
+
+
+def true_world(env, params):
+    """`(key, obs [N, d], action [N, a]) -> (next_obs, reward, terminated)` of the true env
+    put in the state each observation describes (x position 0)."""
+    sim = engine(params.task, params.backend)
+    nq, nv = len(_qpos0(params.task)), _nv(params.task)
+
+    def state_of(obs):
+        qpos = jnp.concatenate([jnp.zeros(1), obs[: nq - 1]])
+        engine_state, physics = sim.reset(qpos, obs[nq - 1 : nq - 1 + nv])
+        return EnvState(engine=engine_state, physics=physics, time=jnp.zeros((), jnp.int32))
+
+    def step(key, obs, action):
+        states = jax.vmap(state_of)(obs)
+        keys = jax.random.split(key, obs.shape[0])
+        next_obs, _, reward, terminated, _, _ = jax.vmap(env.step, (0, 0, 0, None))(
+            keys, states, action, params
+        )
+        return next_obs, reward, terminated
+
+    return step
+
+
+def seed_errors(trainer, state, key, steps: int, starts: int, recent: int) -> list[dict]:
+    buffer = state.buffer
+    size = int(buffer.size)
+    low = max(0, size - recent)
+    k_start, key = jax.random.split(key)
+    obs = buffer.data.obs[jax.random.randint(k_start, (starts,), low, size)]
+    scale = jnp.std(buffer.data.obs[low:size], axis=0) + 1e-6
+    model = trainer._model_world(state, jnp.float32(1.0))
+    true = true_world(trainer.env, trainer.env_params)
+    learner, live = trainer.learner, jnp.ones(starts, bool)
+    imagined, real, rows = obs, obs, []
+    for t in range(steps):
+        key, k_act, k_other, k_model, k_env = jax.random.split(key, 5)
+        action = learner.env_action(learner.act(state.learner.params, k_act, imagined))
+        m_obs, _, m_reward, m_term, _, _ = model(k_model, None, imagined, action, live)
+        one_obs, one_reward, one_term = true(k_env, imagined, action)
+        # What the policy's own noise changes: the true reward of another sampled action.
+        other = learner.env_action(learner.act(state.learner.params, k_other, imagined))
+        _, other_reward, _ = true(k_env, imagined, other)
+        real, real_reward, _ = true(k_env, real, action)
+        rows.append(
+            {
+                "step": t + 1,
+                "obs_error": float(jnp.mean(jnp.abs(m_obs - one_obs) / scale)),
+                "reward_error": float(jnp.mean(jnp.abs(m_reward - one_reward))),
+                "reward_true": float(jnp.mean(one_reward)),
+                "reward_spread": float(jnp.mean(jnp.abs(one_reward - other_reward))),
+                "termination_disagrees": float(jnp.mean(m_term != one_term)),
+                "terminated_true": float(jnp.mean(one_term)),
+                "obs_error_open_loop": float(jnp.mean(jnp.abs(m_obs - real) / scale)),
+                "reward_error_open_loop": float(jnp.mean(jnp.abs(m_reward - real_reward))),
+            }
+        )
+        imagined = m_obs
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("run", type=Path)
+    parser.add_argument("--steps", type=int, default=5, help="imagined steps (default 5)")
+    parser.add_argument("--starts", type=int, default=512, help="branches per seed")
+    parser.add_argument("--recent", type=int, default=20_000, help="draw from the newest N")
+    args = parser.parse_args(argv)
+    config, trainer, states = load_run(args.run)
+    if config.env not in TASKS or not config.algorithm.uses_model:
+        print(f"a model-based run on one of {', '.join(TASKS)} is needed", file=sys.stderr)
+        return 2
+    seeds = []
+    for seed in range(config.seeds):
+        state = jax.tree.map(lambda x, s=seed: x[0, s], states)
+        rows = seed_errors(
+            trainer, state, jax.random.key(seed), args.steps, args.starts, args.recent
+        )
+        seeds.append(rows)
+        first, last = rows[0], rows[-1]
+        print(
+            f"seed {seed}: step 1 obs {first['obs_error']:.3f} sd, reward "
+            f"{first['reward_error']:.3f} of {first['reward_true']:.2f} (another action: "
+            f"{first['reward_spread']:.3f}); step {last['step']} "
+            f"open loop obs {last['obs_error_open_loop']:.3f} sd, reward "
+            f"{last['reward_error_open_loop']:.3f}; termination disagrees "
+            f"{max(r['termination_disagrees'] for r in rows):.3f}",
+            flush=True,
+        )
+    record = {"env": config.env, "algo": config.algo, **vars(args), "seeds": seeds}
+    record["run"] = str(args.run)
+    (args.run / "model_error.json").write_text(json.dumps(record, indent=1) + "\n")
+    print(f"wrote {args.run / 'model_error.json'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
