@@ -9,7 +9,8 @@ position, so the true env can be put in an imagined state; hopper's and walker2d
 velocities make that exact only below 10). Per seed and imagined step t, means over the
 starts of:
 - one-step errors (the true env stepped from the model's own state at t): observation error
-  in units of the buffer's per-dimension std, absolute reward error, how often the
+  in units of the buffer's per-dimension std, absolute reward error (also of the elites'
+  mean prediction, without the drawn member's sampled noise), how often the
   termination test disagrees;
 - open-loop errors (the true env run from the same start through the same actions): the
   compounding observation and reward error.
@@ -70,6 +71,17 @@ def seed_errors(trainer, state, key, steps: int, starts: int, recent: int) -> li
         action = learner.env_action(learner.act(state.learner.params, k_act, imagined))
         m_obs, _, m_reward, m_term, _, _ = model(k_model, None, imagined, action, live)
         one_obs, one_reward, one_term = true(k_env, imagined, action)
+        # The elites' mean prediction, without the drawn member's sampled noise.
+        if trainer.dynamics.probabilistic:
+            mean, _ = jax.vmap(trainer.dynamics.predict_gaussian, (0, None, None, None))(
+                state.model.params, state.model.stats, imagined, trainer.model_action(action)
+            )
+            centre = jnp.mean(mean[state.model.elites], axis=0)
+            e_obs, e_reward = trainer.dynamics.denormalize(
+                state.model.stats, centre[..., :-1], centre[..., -1]
+            )
+        else:
+            e_obs, e_reward = m_obs, m_reward
         # What the policy's own noise changes: the true reward of another sampled action.
         other = learner.env_action(learner.act(state.learner.params, k_other, imagined))
         _, other_reward, _ = true(k_env, imagined, other)
@@ -81,6 +93,8 @@ def seed_errors(trainer, state, key, steps: int, starts: int, recent: int) -> li
                 "reward_error": float(jnp.mean(jnp.abs(m_reward - one_reward))),
                 "reward_true": float(jnp.mean(one_reward)),
                 "reward_spread": float(jnp.mean(jnp.abs(one_reward - other_reward))),
+                "obs_error_elite_mean": float(jnp.mean(jnp.abs(e_obs - one_obs) / scale)),
+                "reward_error_elite_mean": float(jnp.mean(jnp.abs(e_reward - one_reward))),
                 "termination_disagrees": float(jnp.mean(m_term != one_term)),
                 "terminated_true": float(jnp.mean(one_term)),
                 "obs_error_open_loop": float(jnp.mean(jnp.abs(m_obs - real) / scale)),
@@ -113,7 +127,9 @@ def main(argv: list[str] | None = None) -> int:
         print(
             f"seed {seed}: step 1 obs {first['obs_error']:.3f} sd, reward "
             f"{first['reward_error']:.3f} of {first['reward_true']:.2f} (another action: "
-            f"{first['reward_spread']:.3f}); step {last['step']} "
+            f"{first['reward_spread']:.3f}; the elites' mean: obs "
+            f"{first['obs_error_elite_mean']:.3f} sd, reward "
+            f"{first['reward_error_elite_mean']:.3f}); step {last['step']} "
             f"open loop obs {last['obs_error_open_loop']:.3f} sd, reward "
             f"{last['reward_error_open_loop']:.3f}; termination disagrees "
             f"{max(r['termination_disagrees'] for r in rows):.3f}",

@@ -32,6 +32,9 @@ IMAGINE_STARTS = ("initial", "real")
 """Where imagined rollouts start (`ModelConfig.imagine_start`): a fresh initial state (the
 paper's), or a state of the real buffer (branched, ours in the style of MBPO)."""
 
+IMAGINED_STEPS = ("sample", "mean")
+"""What a probabilistic ensemble's imagined step is (`ModelConfig.imagined_step`)."""
+
 IMAGINED_STD = ("learn", "real")
 """What branched imagination's updates do to a state-independent log std
 (`ModelConfig.imagined_std`)."""
@@ -296,6 +299,11 @@ class ModelConfig:
     error, and imagination steps their mean."""
     elites: int | None = None
     """`probabilistic`: the members with the lowest held-out error that imagine (None: all)."""
+    imagined_step: str = "sample"
+    """`probabilistic`, one of `IMAGINED_STEPS`: "sample" (MBPO's, PETS's): a draw from the
+    Gaussian of one elite picked at random; "mean": the elites' mean prediction, no draw (a
+    simulator is deterministic, and the drawn noise is about half of a hopper model's
+    one-step reward error: docs/benchmarks.md)."""
     hidden_layers: int = 1
     """`probabilistic`: hidden layers of each member's net, `hidden` units each (the
     paper's model is two nets of one hidden layer, kept when not probabilistic)."""
@@ -860,6 +868,14 @@ def validate(config: Config) -> Config:
         (
             model.ld != "variance" or model.probabilistic,
             "ld 'variance' reads the members' predicted variance: it needs model.probabilistic",
+        ),
+        (
+            model.imagined_step in IMAGINED_STEPS,
+            f"unknown imagined_step {model.imagined_step!r}; valid: {', '.join(IMAGINED_STEPS)}",
+        ),
+        (
+            model.imagined_step == "sample" or model.probabilistic,
+            "imagined_step 'mean' is a probabilistic ensemble's: it needs model.probabilistic",
         ),
         (0 < model.m2ac_keep <= 1, f"m2ac_keep must be in (0, 1], got {model.m2ac_keep}"),
         (model.oracle_error > 0, f"oracle_error must be > 0, got {model.oracle_error}"),

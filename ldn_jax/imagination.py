@@ -241,7 +241,8 @@ def _ensemble_degree(d_rel: Array, gain: Array):
 def _gaussian_estimate(
     dynamics: Dynamics, model: ModelState, obs: Array, action: Array, key: Array, reading: str
 ):
-    """A probabilistic ensemble's step: a sample of one elite drawn per row, and either the
+    """A probabilistic ensemble's step: a sample of one elite drawn per row (or, under
+    `imagined_step` "mean", the elites' mean prediction), and either the
     elites' disagreement on their means ("ensemble") or the drawn member's mean predicted
     variance, halved as eq. 3 halves ("variance"), relative to the held-out error."""
     mean, log_var = jax.vmap(dynamics.predict_gaussian, (0, None, None, None))(
@@ -252,7 +253,11 @@ def _gaussian_estimate(
     member = model.elites[pick]  # [N]
     chosen = lambda x: jnp.take_along_axis(x, member[None, :, None], axis=0)[0]
     centre, chosen_log_var = chosen(mean), chosen(log_var)
-    sample = centre + jnp.exp(0.5 * chosen_log_var) * jax.random.normal(k_noise, centre.shape)
+    if dynamics.config.imagined_step == "mean":
+        sample = jnp.mean(mean[model.elites], axis=0)
+    else:
+        noise = jax.random.normal(k_noise, centre.shape)
+        sample = centre + jnp.exp(0.5 * chosen_log_var) * noise
     reduce = dynamics.config.ld_reduce
     if reading == "variance":
         d = 0.5 * REDUCE[reduce](jnp.exp(chosen_log_var), axis=-1)

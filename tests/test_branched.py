@@ -119,6 +119,30 @@ def test_elites_are_the_members_with_the_lowest_held_out_error():
     assert float(ranked.error_scale) == pytest.approx(expected, rel=1e-5)
 
 
+def test_the_mean_imagined_step_is_the_elites_mean_and_draws_nothing():
+    from ldn_jax.imagination import _gaussian_estimate
+
+    obs, action = jax.random.normal(jax.random.key(2), (7, 4)), jnp.ones((7, 2))
+    steps = {}
+    for step in ("sample", "mean"):
+        dynamics = Dynamics(ModelConfig(**{**BRANCHED, "imagined_step": step}), 4, 2)
+        state = dynamics.init(jax.random.key(0))
+        state = state.replace(elites=jnp.array([2, 0], jnp.int32))
+        steps[step] = [
+            _gaussian_estimate(dynamics, state, obs, action, jax.random.key(k), "ensemble")[0]
+            for k in (1, 5)
+        ]
+    mean, _ = jax.vmap(dynamics.predict_gaussian, (0, None, None, None))(
+        state.params, state.stats, obs, action
+    )
+    expected = (mean[2] + mean[0]) / 2
+    for next_obs, reward in steps["mean"]:
+        np.testing.assert_allclose(np.asarray(next_obs), np.asarray(expected[:, :-1]), rtol=1e-6)
+        np.testing.assert_allclose(np.asarray(reward), np.asarray(expected[:, -1]), rtol=1e-6)
+    (a, _), (b, _) = steps["sample"]  # the default draws: two keys, two steps
+    assert not np.allclose(np.asarray(a), np.asarray(b))
+
+
 # -- branches in a run -----------------------------------------------------------------------
 
 
@@ -213,6 +237,8 @@ def _build(*argv):
         (["--algo", "ldn", "--ld", "ensemble", "--set", "model.elites=9"], "elites must be in [1,"),
         (["--algo", "ldn", "--set", "model.branches=0"], "branches must be >= 1"),
         (["--algo", "ldn", "--set", "model.imagined_std=fixed"], "unknown imagined_std 'fixed'"),
+        (["--algo", "ldn", "--set", "model.imagined_step=mode"], "unknown imagined_step 'mode'"),
+        (["--algo", "ldn", "--set", "model.imagined_step=mean"], "it needs model.probabilistic"),
         (["--algo", "ppo-model", "--set", "model.imagined_std=real"], "needs branched imagination"),
         (
             ["--algo", "ppo-model", "--preset", "branched", "--env", "cartpole-v1",

@@ -8,7 +8,8 @@ ensemble, `docs/training.md`), every rule that can end a branch, side by side wi
 learner alone at the same constants: no rule under fixed caps of 1, 5 and 15 steps, MBPO's
 horizon schedule, the LD draw (disagreement and predicted-variance readings) under a cap of
 15, M2AC's mask and MACURA's threshold under the same cap; and the cap of 5 with the
-policy's log std left to the real updates (`model.imagined_std` "real", not a rule). Per rule
+policy's log std left to the real updates (`model.imagined_std` "real") or the elites' mean
+as each imagined step (`model.imagined_step` "mean"), which are not rules. Per rule
 and env: IQM [95% interval] of the final moving return and of the greedy return after training,
 P(improvement) of the greedy return over PPO and over the best fixed cap, imagined steps per
 real step, and training seconds.
@@ -57,6 +58,11 @@ RULES = {
     "ld-variance": ("ppo-ldn", {"ld": "variance", "horizon": 15}, "LD draw, variance, cap 15"),
     "m2ac": ("ppo-model", {"stop": "m2ac", "horizon": 15}, "M2AC mask, cap 15"),
     "macura": ("ppo-model", {"stop": "macura", "horizon": 15}, "MACURA threshold, cap 15"),
+    "mean": (
+        "ppo-model",
+        {"horizon": 5, "imagined_step": "mean"},
+        "no rule, cut at 5 steps, the elites' mean step",
+    ),
     "std-real": (
         "ppo-model",
         {"horizon": 5, "imagined_std": "real"},
