@@ -9,11 +9,16 @@ position, so the true env can be put in an imagined state; hopper's and walker2d
 velocities make that exact only below 10). Per seed and imagined step t, means over the
 starts of:
 - one-step errors (the true env stepped from the model's own state at t): observation error
-  in units of the buffer's per-dimension std, absolute reward error (also of the elites'
+  in units of the whole buffer's per-dimension std, absolute reward error (also of the elites'
   mean prediction, without the drawn member's sampled noise), how often the
   termination test disagrees;
 - open-loop errors (the true env run from the same start through the same actions): the
-  compounding observation and reward error.
+  compounding observation and reward error;
+- the "std push": the covariance of the one-step target r + gamma V(s') (the learner's reward
+  units and critic) with (z^2 - 1) of the sampled action, z its distance from the policy's
+  mean in stds. A log std's policy gradient follows its sign: from the model's prediction
+  and from the true env, side by side, it says whether imagined targets push the policy's
+  spread down where real ones would not.
 Writes model_error.json into RUN_DIR.
 """
 
@@ -61,14 +66,22 @@ def seed_errors(trainer, state, key, steps: int, starts: int, recent: int) -> li
     low = max(0, size - recent)
     k_start, key = jax.random.split(key)
     obs = buffer.data.obs[jax.random.randint(k_start, (starts,), low, size)]
-    scale = jnp.std(buffer.data.obs[low:size], axis=0) + 1e-6
+    # Units: each dimension's std over the whole buffer (the newest states alone can hold a
+    # dimension nearly still once the policy is nearly deterministic).
+    scale = jnp.std(buffer.data.obs[:size], axis=0) + 1e-6
     model = trainer._model_world(state, jnp.float32(1.0))
     true = true_world(trainer.env, trainer.env_params)
     learner, live = trainer.learner, jnp.ones(starts, bool)
     imagined, real, rows = obs, obs, []
     for t in range(steps):
         key, k_act, k_other, k_model, k_env = jax.random.split(key, 5)
-        action = learner.env_action(learner.act(state.learner.params, k_act, imagined))
+        params = state.learner.params
+        raw = learner.act(params, k_act, imagined)
+        action = learner.env_action(raw)
+        centre, spread = learner.policy.mean_std(learner.logits(params, imagined))
+        # (z^2 - 1) averaged over the action's dimensions: what a log std's gradient weighs
+        # each row's advantage by (positive: the action was far from the mean).
+        wide = jnp.mean(jnp.square((raw - centre) / spread), axis=-1) - 1.0
         m_obs, _, m_reward, m_term, _, _ = model(k_model, None, imagined, action, live)
         one_obs, one_reward, one_term = true(k_env, imagined, action)
         # The elites' mean prediction, without the drawn member's sampled noise.
@@ -86,9 +99,20 @@ def seed_errors(trainer, state, key, steps: int, starts: int, recent: int) -> li
         other = learner.env_action(learner.act(state.learner.params, k_other, imagined))
         _, other_reward, _ = true(k_env, imagined, other)
         real, real_reward, _ = true(k_env, real, action)
+        # One-step TD targets r + gamma V(s') in the learner's reward units, from the model's
+        # prediction and from the true env, and how each covaries with `wide`.
+        units = 1.0
+        if "reward_norm" in params:
+            units = 1.0 / jnp.sqrt(params["reward_norm"]["var"][0] + 1e-8)
+        gamma = trainer.config.agent.gamma
+        target_model = units * m_reward + gamma * learner.value(params, m_obs) * (1 - m_term)
+        target_true = units * one_reward + gamma * learner.value(params, one_obs) * (1 - one_term)
+        covary = lambda x, w=wide: float(jnp.mean((x - jnp.mean(x)) * w))
         rows.append(
             {
                 "step": t + 1,
+                "std_push_model": covary(target_model),
+                "std_push_true": covary(target_true),
                 "obs_error": float(jnp.mean(jnp.abs(m_obs - one_obs) / scale)),
                 "reward_error": float(jnp.mean(jnp.abs(m_reward - one_reward))),
                 "reward_true": float(jnp.mean(one_reward)),
@@ -124,6 +148,11 @@ def main(argv: list[str] | None = None) -> int:
         )
         seeds.append(rows)
         first, last = rows[0], rows[-1]
+        print(
+            f"seed {seed}: std push at step 1, model {first['std_push_model']:+.4f}, true "
+            f"{first['std_push_true']:+.4f}",
+            flush=True,
+        )
         print(
             f"seed {seed}: step 1 obs {first['obs_error']:.3f} sd, reward "
             f"{first['reward_error']:.3f} of {first['reward_true']:.2f} (another action: "
