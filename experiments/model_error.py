@@ -34,6 +34,7 @@ import jax.numpy as jnp
 
 from experiments.paper.shadow import load_run
 from ldn_jax.envs.mujoco import EnvState, _nv, _qpos0, engine
+from ldn_jax.learning_degree import ensemble_mean
 
 TASKS = ("halfcheetah", "hopper", "walker2d")
 
@@ -89,7 +90,7 @@ def seed_errors(trainer, state, key, steps: int, starts: int, recent: int) -> li
             mean, _ = jax.vmap(trainer.dynamics.predict_gaussian, (0, None, None, None))(
                 state.model.params, state.model.stats, imagined, trainer.model_action(action)
             )
-            centre = jnp.mean(mean[state.model.elites], axis=0)
+            centre = ensemble_mean(mean[state.model.elites])
             e_obs, e_reward = trainer.dynamics.denormalize(
                 state.model.stats, centre[..., :-1], centre[..., -1]
             )

@@ -254,7 +254,7 @@ def _gaussian_estimate(
     chosen = lambda x: jnp.take_along_axis(x, member[None, :, None], axis=0)[0]
     centre, chosen_log_var = chosen(mean), chosen(log_var)
     if dynamics.config.imagined_step == "mean":
-        sample = jnp.mean(mean[model.elites], axis=0)
+        sample = ensemble_mean(mean[model.elites])
     else:
         noise = jax.random.normal(k_noise, centre.shape)
         sample = centre + jnp.exp(0.5 * chosen_log_var) * noise

@@ -36,7 +36,8 @@ def pytest_unconfigure(config):
     path = getattr(config, "_session_cache", None)
     if path:
         shutil.rmtree(path, ignore_errors=True)
-        os.environ.pop("JAX_COMPILATION_CACHE_DIR", None)
+        for name in ("JAX_COMPILATION_CACHE_DIR", *CACHE_VARIABLES):
+            os.environ.pop(name, None)
 
 
 HEAVY_FIRST = ("test_paper.py", "test_train.py", "test_branched.py")
