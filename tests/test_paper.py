@@ -293,7 +293,7 @@ def test_smoke_targets_run_every_algorithm_on_inverted_pendulum(smoke):
 
 
 def test_default_budget_targets_are_the_users_commands():
-    from experiments.paper import targets
+    from experiments.paper import locomotion, targets
 
     scale = report.common.SCALES["cpu"]
     config = targets.run_config(scale, "halfcheetah", "ldn", 10, (0.5, 1.0, 2.0))
@@ -301,6 +301,10 @@ def test_default_budget_targets_are_the_users_commands():
     assert targets.run_config(scale, "inverted_pendulum", "ppo", 5, (1.0,)).steps == 600_000
     out = targets.run_dir(Path("r"), scale, config)
     assert out == Path("r/runs/cpu/targets-halfcheetah-ldn-k0.5,1,2")
+    # PPO on halfcheetah is the locomotion study's run: one config, trained once for both.
+    ppo = targets.run_config(scale, "halfcheetah", "ppo", 5, None)
+    assert ppo == locomotion.config_of("halfcheetah", 5)
+    assert targets.run_dir(Path("r"), scale, ppo) == Path("r/runs/locomotion/halfcheetah-ppo-s5")
 
 
 def test_cpu_scale_runs_every_mujoco_task_on_its_budget():

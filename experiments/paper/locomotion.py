@@ -140,7 +140,8 @@ def curves(rows: list[dict], path: Path) -> None:
     plt.close(fig)
 
 
-def _run_dir(results: Path, env: str, seeds: int) -> Path:
+def run_dir(results: Path, env: str, seeds: int) -> Path:
+    """Where the study keeps a task's run (the targets' PPO row reads it too)."""
     return results / "runs" / "locomotion" / f"{env}-ppo-s{seeds}"
 
 
@@ -158,7 +159,7 @@ def main(argv: list[str] | None = None) -> int:
     record = out / "locomotion.json"
     rows = {r["env"]: r for r in json.loads(record.read_text())["rows"]} if record.exists() else {}
     for env in envs:  # the files after each task, so a stopped study keeps what it finished
-        run = _run_dir(args.results, env, args.seeds)
+        run = run_dir(args.results, env, args.seeds)
         summary = common.ensure_run(config_of(env, args.seeds), run)
         rows[env] = row_of(env, run, summary)
         _write(out, record, [rows[env] for env in ZOO if env in rows], args.results)
@@ -168,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def _write(out: Path, record: Path, rows: list[dict], results: Path) -> None:
     for row in rows:  # a row recorded before rows kept their curve: from its run, if at hand
-        run = _run_dir(results, row["env"], row["seeds"])
+        run = run_dir(results, row["env"], row["seeds"])
         if "curve" not in row and (run / "summary.json").exists():
             row["curve"] = _curve(common.load_history(run))
     (out / "locomotion.md").write_text(section(rows))

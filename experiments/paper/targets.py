@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.paper import common
+from experiments.paper import common, locomotion
 from ldn_jax.config import from_preset, validate
 from ldn_jax.host.metrics import run_crossing
 
@@ -36,15 +36,17 @@ CHEETAH_PPO = 2000.0
 RUNS = (
     *(("inverted_pendulum", algo, 5, (1.0,)) for algo in PENDULUM_ALGOS),
     ("halfcheetah", "ldn", 10, (0.5, 1.0, 2.0)),
-    ("halfcheetah", "ppo", 5, (1.0,)),
+    ("halfcheetah", "ppo", 5, None),
 )
-"""(env, algo, seeds, K) of each run, as a user would start it."""
+"""(env, algo, seeds, K) of each run, as a user would start it (None: the default K, the
+first one for a model-free learner)."""
 
 
 def run_config(scale: common.Scale, env: str, algo: str, seeds: int, k: tuple[float, ...]):
     """The run at its default budget, or at the smoke scale's (None: not run there)."""
     if scale.name != "smoke":
-        return validate(from_preset("paper", env=env, algo=algo, seeds=seeds, k=k))
+        chosen = {} if k is None else {"k": k}
+        return validate(from_preset("paper", env=env, algo=algo, seeds=seeds, **chosen))
     if env not in scale.mujoco_budgets:
         return None
     return common.run_config(scale, env, algo)
@@ -52,7 +54,10 @@ def run_config(scale: common.Scale, env: str, algo: str, seeds: int, k: tuple[fl
 
 def run_dir(results: Path, scale: common.Scale, config) -> Path:
     """Beside the tables' runs; at the default budgets under their own names, since the
-    tables' runs of the same env and algorithm have shorter budgets."""
+    tables' runs of the same env and algorithm have shorter budgets. PPO on a locomotion task
+    is the locomotion study's run (the same config), trained once for both."""
+    if scale.name != "smoke" and config.algo == "ppo" and config.env in locomotion.ZOO:
+        return locomotion.run_dir(results, config.env, config.seeds)
     out = common.run_dir(results, scale, config)
     return out if scale.name == "smoke" else out.with_name("targets-" + out.name)
 
