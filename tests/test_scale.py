@@ -113,10 +113,9 @@ def test_two_devices_give_the_one_device_run(reference, tmp_path):
         assert load_policy(out, seed=seed, k=2.0)(obs) == load_policy(reference, seed, k=2.0)(obs)
 
 
+@pytest.mark.slow  # the default suite splits a branched run over 2 devices bitwise (test_branched)
 @pytest.mark.optimized
-@pytest.mark.parametrize(  # 2 seeds per device; 1, run twice (slow: the default suite's time)
-    "devices", [2, pytest.param(4, marks=pytest.mark.slow)]
-)
+@pytest.mark.parametrize("devices", [2, 4])  # 2 seeds per device; 1, run twice
 def test_bitwise_devices_give_the_one_device_run_to_the_bit(bitwise_reference, tmp_path, devices):
     out = tmp_path / "split"
     args = [*ARGS, "--devices", str(devices), "--bitwise", "--compile-cache", "none"]

@@ -4,16 +4,23 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 
 from ldn_jax.config import Config
 from ldn_jax.host import stats
 from ldn_jax.host.metrics import mean_band
 from ldn_jax.host.run_dir import RunDir
+
+
+def pyplot():
+    """matplotlib's pyplot on the file-only Agg backend, imported when a figure is drawn (it
+    takes a third of a second: a command that draws nothing does not pay it)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
 
 
 def band_panel(
@@ -48,6 +55,7 @@ def learning_curves(
     threshold: float | None = None,
 ) -> None:
     """One figure of one `band_panel`, written to `path`."""
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
     band_panel(ax, curves, title, threshold)
     fig.tight_layout()

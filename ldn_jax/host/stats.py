@@ -21,7 +21,6 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 
 import numpy as np
-from scipy import stats
 
 RESAMPLES = 2000
 """Bootstrap resamples per interval (rliable's default: 2,000)."""
@@ -38,6 +37,8 @@ Scores = Sequence[float] | np.ndarray | Mapping[str, Sequence[float] | np.ndarra
 def iqm(*tasks: np.ndarray, axis: int = -1) -> np.ndarray | float:
     """The interquartile mean of all the scores of `tasks` pooled: the mean of the middle
     half (`scipy.stats.trim_mean` cutting 25% at each end, as rliable does)."""
+    from scipy import stats  # here, not at import: scipy.stats takes most of a second
+
     return stats.trim_mean(np.concatenate(tasks, axis=axis), 0.25, axis=axis)
 
 
@@ -56,6 +57,8 @@ def interval(scores: Scores, statistic=iqm) -> list[float] | None:
     if all(np.all(t == t[0]) for t in tasks):  # nothing varies: the interval is the point
         point = float(statistic(*tasks, axis=-1))
         return [point, point]
+    from scipy import stats
+
     result = stats.bootstrap(
         tasks,
         statistic,
@@ -117,6 +120,8 @@ def improvement(x: Scores, y: Scores, lower_is_better: bool = False) -> dict:
         if all(np.all(s == s[0]) for s in pairs):
             low_high = [point, point]
         else:
+            from scipy import stats
+
             result = stats.bootstrap(
                 pairs,
                 statistic,
