@@ -18,7 +18,11 @@ starts of:
   units and critic) with (z^2 - 1) of the sampled action, z its distance from the policy's
   mean in stds. A log std's policy gradient follows its sign: from the model's prediction
   and from the true env, side by side, it says whether imagined targets push the policy's
-  spread down where real ones would not.
+  spread down where real ones would not;
+- the critic at the cut, open loop: V at the model's state against V at the true state
+  reached through the same actions, and the t-step return of a branch's first row (rewards
+  to t, then the critic; stopped at a termination) from the model and from the true env,
+  each beside its spread over the starts.
 Writes model_error.json into RUN_DIR.
 """
 
@@ -74,6 +78,12 @@ def seed_errors(trainer, state, key, steps: int, starts: int, recent: int) -> li
     true = true_world(trainer.env, trainer.env_params)
     learner, live = trainer.learner, jnp.ones(starts, bool)
     imagined, real, rows = obs, obs, []
+    gamma = trainer.config.agent.gamma
+    # The t-step return each branch's first row learns from, sum_i gamma^i r_i + gamma^t V(s_t)
+    # (stopped at a termination), accumulated along the model's branch and along the true
+    # env's run through the same actions.
+    m_sum, r_sum = jnp.zeros(starts), jnp.zeros(starts)
+    m_alive, r_alive = jnp.ones(starts), jnp.ones(starts)
     for t in range(steps):
         key, k_act, k_other, k_model, k_env = jax.random.split(key, 5)
         params = state.learner.params
@@ -99,13 +109,19 @@ def seed_errors(trainer, state, key, steps: int, starts: int, recent: int) -> li
         # What the policy's own noise changes: the true reward of another sampled action.
         other = learner.env_action(learner.act(state.learner.params, k_other, imagined))
         _, other_reward, _ = true(k_env, imagined, other)
-        real, real_reward, _ = true(k_env, real, action)
+        real, real_reward, real_term = true(k_env, real, action)
         # One-step TD targets r + gamma V(s') in the learner's reward units, from the model's
         # prediction and from the true env, and how each covaries with `wide`.
         units = 1.0
         if "reward_norm" in params:
             units = 1.0 / jnp.sqrt(params["reward_norm"]["var"][0] + 1e-8)
-        gamma = trainer.config.agent.gamma
+        discount = gamma**t
+        m_sum = m_sum + m_alive * discount * units * m_reward
+        r_sum = r_sum + r_alive * discount * units * real_reward
+        m_alive, r_alive = m_alive * (1 - m_term), r_alive * (1 - real_term)
+        m_value, r_value = learner.value(params, m_obs), learner.value(params, real)
+        m_return = m_sum + m_alive * gamma ** (t + 1) * m_value
+        r_return = r_sum + r_alive * gamma ** (t + 1) * r_value
         target_model = units * m_reward + gamma * learner.value(params, m_obs) * (1 - m_term)
         target_true = units * one_reward + gamma * learner.value(params, one_obs) * (1 - one_term)
         covary = lambda x, w=wide: float(jnp.mean((x - jnp.mean(x)) * w))
@@ -124,6 +140,13 @@ def seed_errors(trainer, state, key, steps: int, starts: int, recent: int) -> li
                 "terminated_true": float(jnp.mean(one_term)),
                 "obs_error_open_loop": float(jnp.mean(jnp.abs(m_obs - real) / scale)),
                 "reward_error_open_loop": float(jnp.mean(jnp.abs(m_reward - real_reward))),
+                # The critic at the cut, open loop, in the learner's units: at the model's state
+                # against at the true one, beside how much it varies over the starts.
+                "value_error_open_loop": float(jnp.mean(jnp.abs(m_value - r_value))),
+                "value_spread": float(jnp.std(r_value)),
+                # The (t+1)-step return of the branch's first row, model against true env.
+                "return_error_open_loop": float(jnp.mean(jnp.abs(m_return - r_return))),
+                "return_spread": float(jnp.std(r_return)),
             }
         )
         imagined = m_obs
@@ -163,6 +186,13 @@ def main(argv: list[str] | None = None) -> int:
             f"open loop obs {last['obs_error_open_loop']:.3f} sd, reward "
             f"{last['reward_error_open_loop']:.3f}; termination disagrees "
             f"{max(r['termination_disagrees'] for r in rows):.3f}",
+            flush=True,
+        )
+        print(
+            f"seed {seed}: step {last['step']} open loop, learner's units: critic at the cut "
+            f"off by {last['value_error_open_loop']:.3f} (its spread over starts "
+            f"{last['value_spread']:.3f}); the {last['step']}-step return off by "
+            f"{last['return_error_open_loop']:.3f} (spread {last['return_spread']:.3f})",
             flush=True,
         )
     record = {"env": config.env, "algo": config.algo, **vars(args), "seeds": seeds}

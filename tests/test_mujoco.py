@@ -384,3 +384,28 @@ def test_every_task_plays_gymnasiums_step_limit_and_the_paper_reacher_its_1000()
     assert Config.from_dict(stored).episode_limit == 1000
     cartpole = from_preset("paper", env="cartpole-v1", algo="a2c", max_steps=7)
     assert Trainer(cartpole).max_steps == 7 and cartpole.steps_per_iteration == 10
+
+
+@pytest.mark.parametrize("task", ["halfcheetah", "hopper"])
+def test_the_model_error_tools_true_world_steps_from_an_observation_as_the_env_does(task):
+    """`experiments.model_error` puts the true env in the state an observation describes (x
+    position 0) and steps it: from the observations of a real rollout it must give the
+    rollout's own next observations and rewards (x is not observed and rewards move with its
+    change, not its value)."""
+    from experiments.model_error import true_world
+
+    env, params = _params(task)
+    keys = jax.random.split(jax.random.key(3), 4)
+    actions = jnp.asarray(_grid_actions(np.random.default_rng(2), 4, SIZES[task][1]))
+
+    def first_steps(key, action):
+        _, state = env.reset(key, params)
+        obs2, state, *_ = env.step(None, state, action, params)  # off the initial pose
+        obs3, _, reward, terminated, *_ = env.step(None, state, action, params)
+        return obs2, obs3, reward, terminated
+
+    obs, want_obs, want_reward, want_term = jax.vmap(first_steps)(keys, actions)
+    got_obs, got_reward, got_term = true_world(env, params)(jax.random.key(0), obs, actions)
+    np.testing.assert_allclose(got_obs, want_obs, rtol=1e-4, atol=1e-4)
+    np.testing.assert_allclose(got_reward, want_reward, rtol=1e-4, atol=1e-4)
+    np.testing.assert_array_equal(got_term, want_term)
