@@ -122,7 +122,7 @@ def seed_errors(trainer, state, key, steps: int, starts: int, recent: int) -> li
         m_value, r_value = learner.value(params, m_obs), learner.value(params, real)
         m_return = m_sum + m_alive * gamma ** (t + 1) * m_value
         r_return = r_sum + r_alive * gamma ** (t + 1) * r_value
-        target_model = units * m_reward + gamma * learner.value(params, m_obs) * (1 - m_term)
+        target_model = units * m_reward + gamma * m_value * (1 - m_term)
         target_true = units * one_reward + gamma * learner.value(params, one_obs) * (1 - one_term)
         covary = lambda x, w=wide: float(jnp.mean((x - jnp.mean(x)) * w))
         rows.append(
