@@ -307,6 +307,39 @@ def test_default_budget_targets_are_the_users_commands():
     assert targets.run_dir(Path("r"), scale, ppo) == Path("r/runs/locomotion/halfcheetah-ppo-s5")
 
 
+def test_targets_runs_one_row_and_keeps_the_others_with_their_dates(tmp_path, capsys, monkeypatch):
+    from experiments.paper import targets
+
+    monkeypatch.setattr(targets.common, "_compile_cache", lambda results: None)
+    earlier = json.loads((ROOT / "experiments/results/targets/targets.json").read_text())
+    earlier = {**earlier, "scale": "smoke", "machine": {**earlier["machine"], "date": "2026-11-30"}}
+    for row in earlier["rows"]:
+        row.pop("date", None)
+    (tmp_path / "targets").mkdir()
+    (tmp_path / "targets" / "targets.json").write_text(json.dumps(earlier))
+    # At the smoke scale halfcheetah is pending: the row is measured again without training.
+    assert targets.main(["--smoke", "--results", str(tmp_path), "--runs", "halfcheetah-ppo"]) == 0
+    after = json.loads((tmp_path / "targets" / "targets.json").read_text())
+    assert after["rows"][:7] == [{"date": "2026-11-30", **row} for row in earlier["rows"][:7]]
+    assert after["rows"][7] == {"env": "halfcheetah", "algo": "ppo", "status": "pending"}
+    assert after["curves_date"] == "2026-11-30"
+    assert not (tmp_path / "targets" / "targets.png").exists()
+    section = report.report_mujoco.targets_section(after)
+    assert "(the runs of 2026-11-30)" in section.blocks[0]
+    assert "measured 2026-11-30" in " ".join(section.findings)
+    for bad in (
+        ["--runs", "halfcheetah-sac"],
+        ["--runs", ","],
+        ["--scale", "cpu", "--runs", "halfcheetah-ppo"],
+    ):
+        with pytest.raises(SystemExit) as refused:
+            targets.main(
+                ["--results", str(tmp_path), *(["--smoke"] if "--scale" not in bad else []), *bad]
+            )
+        assert refused.value.code == 2
+        assert capsys.readouterr().err.count("\n") == 1
+
+
 def test_cpu_scale_runs_every_mujoco_task_on_its_budget():
     common = report.common
     scale = common.SCALES["cpu"]

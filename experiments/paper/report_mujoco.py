@@ -193,11 +193,19 @@ def _span(values: list, digits: int = 0) -> str:
     return f"{min(have):,.{digits}f} to {max(have):,.{digits}f}"
 
 
+def _measured(row: dict, record: dict) -> str:
+    """The day a targets row was measured (rows written before rows had dates: the file's)."""
+    return row.get("date") or record.get("machine", {}).get("date", "–")
+
+
 def targets_section(record: dict) -> Section:
     intro = (
         "What the defaults deliver (not a table of the paper): each run at its default budget "
-        "(`ldn_jax.presets.TASKS`), as `python experiments/run.py --env ENV --algo ALGO --seeds N` "
-        "starts it. Curves: ![targets](targets/targets.png)"
+        "(`ldn_jax.presets.TASKS`), as `ldn-jax --env ENV --algo ALGO --seeds N` starts it, "
+        "dated by the day each run finished (a row measured under an earlier commit's defaults "
+        "is that commit's). Curves"
+        + (f" (the runs of {record['curves_date']})" if "curves_date" in record else "")
+        + ": ![targets](targets/targets.png)"
     )
     rows = [r for r in record["rows"] if r["status"] == "done"]
     pendulum = [r for r in rows if r["env"] == "inverted_pendulum"]
@@ -206,7 +214,7 @@ def targets_section(record: dict) -> Section:
     findings = []
     if pendulum:
         header = ["algorithm", "budget", "seeds >= 900", "env steps to 900", "highest"]
-        header += ["final moving return", "greedy eval", "training s", "target met"]
+        header += ["final moving return", "greedy eval", "training s", "target met", "measured"]
         parts.append(
             Table(
                 header,
@@ -221,6 +229,7 @@ def targets_section(record: dict) -> Section:
                         _span(r["eval_return"]),
                         f"{r['train_seconds']:.0f}",
                         "yes" if r["met"] else "NO",
+                        _measured(r, record),
                     ]
                     for r in pendulum
                 ],
@@ -236,7 +245,7 @@ def targets_section(record: dict) -> Section:
         )
     if cheetah:
         header = ["algorithm", "budget", "runs", "mean moving return: first -> final"]
-        header += ["final, per run", "greedy eval, mean", "wall s", "target", "met"]
+        header += ["final, per run", "greedy eval, mean", "wall s", "target", "met", "measured"]
         target = {
             "ldn": "rise >= 1,000 in under 30 min",
             "ppo": "mean final >= 2,000",
@@ -253,16 +262,18 @@ def targets_section(record: dict) -> Section:
                     f"{r['first_mean_moving_return']:,.0f} -> {r['final_mean_moving_return']:,.0f}",
                     _span(r["final_moving_return"]),
                     f"{evals:,.0f}",
-                    f"{r['wall_seconds']:.0f}",
+                    f"{r['wall_seconds']:,.0f}",
                     target.get(r["algo"], ""),
                     "yes" if r["met"] else "NO",
+                    _measured(r, record),
                 ]
             )
             findings.append(
                 f"Targets, halfcheetah {r['algo']}: mean moving return "
                 f"{r['first_mean_moving_return']:,.0f} -> {r['final_mean_moving_return']:,.0f} "
                 f"over {runs} runs in {r['wall_seconds'] / 60:.0f} minutes "
-                f"({target.get(r['algo'], '')}: {'met' if r['met'] else 'NOT met'})."
+                f"({target.get(r['algo'], '')}: {'met' if r['met'] else 'NOT met'}; "
+                f"measured {_measured(r, record)})."
             )
         parts.append(Table(header, table))
     pending = [r for r in record["rows"] if r["status"] != "done"]

@@ -2,6 +2,7 @@
 halfcheetah command, and PPO on halfcheetah.
 
     python -m experiments.paper.targets [--scale cpu|cpu-full|paper] [--smoke] [--results DIR]
+        [--runs ENV-ALGO,...]
 
 Not a table of the paper: what a user gets from the defaults (`ldn_jax.presets.TASKS`), checked
 against the targets the project set itself.
@@ -12,10 +13,17 @@ against the targets the project set itself.
 - halfcheetah, `--algo ppo`, 5 seeds: a mean final moving return >= 2,000 by 1M steps.
 At the smoke scale the runs take the scale's budgets instead (and halfcheetah is left
 pending). Writes targets.json and targets.png into DIR/targets/.
+
+`--runs` (e.g. `halfcheetah-ppo`) trains and measures those runs only and keeps every other
+row of the earlier targets.json as it was, with the date it was measured; the curves are
+redrawn only when every row's run is on this machine.
 """
 
 from __future__ import annotations
 
+import argparse
+import datetime
+import json
 import sys
 from pathlib import Path
 
@@ -158,25 +166,86 @@ def curves(entries: list[dict], path: Path) -> None:
     plt.close(fig)
 
 
+def _names() -> list[str]:
+    return [f"{env}-{algo}" for env, algo, _, _ in RUNS]
+
+
+def parse_runs(argv: list[str] | None) -> tuple[set[str] | None, list[str]]:
+    """`--runs` (None: every run) and the arguments left for `common.parse_args`."""
+    parser = argparse.ArgumentParser(add_help=False)
+    parser.add_argument("--runs", default=None)
+    args, rest = parser.parse_known_args(sys.argv[1:] if argv is None else argv)
+    if args.runs is None:
+        return None, rest
+    chosen = {name.strip() for name in args.runs.split(",") if name.strip()}
+    unknown = sorted(chosen - set(_names()))
+    if unknown or not chosen:
+        _refuse(
+            f"--runs: unknown {', '.join(unknown) or '(none given)'}; "
+            f"choose among {', '.join(_names())}"
+        )
+    return chosen, rest
+
+
+def _refuse(message: str) -> None:
+    """Bad input: one line on stderr, exit code 2 (as argparse does)."""
+    print(f"targets: error: {message}", file=sys.stderr)
+    raise SystemExit(2)
+
+
+def _earlier(record: dict) -> dict[str, dict]:
+    """The rows of an earlier targets.json by run name, each with the date it was measured."""
+    date = record.get("machine", {}).get("date")
+    return {f"{row['env']}-{row['algo']}": {"date": date, **row} for row in record.get("rows", [])}
+
+
+def _finished(run: Path) -> str:
+    """The day a run finished training (its summary file's), as the result files date it."""
+    stamp = (run / "summary.json").stat().st_mtime
+    return datetime.datetime.fromtimestamp(stamp, datetime.UTC).date().isoformat()
+
+
 def main(argv: list[str] | None = None) -> int:
-    scale, results = common.parse_args(argv, __doc__)
-    entries, table = [], []
+    chosen, rest = parse_runs(argv)
+    scale, results = common.parse_args(rest, __doc__)
+    out = common.out_dir(results, "targets")
+    earlier_record = {}
+    if chosen is not None:
+        if not (out / "targets.json").is_file():
+            _refuse(f"--runs keeps the other rows of {out / 'targets.json'}, which is not there")
+        earlier_record = json.loads((out / "targets.json").read_text())
+        if earlier_record.get("scale") != scale.name:
+            _refuse(f"--runs: {out / 'targets.json'} is of scale {earlier_record.get('scale')}")
+    earlier = _earlier(earlier_record)
+    record = common.scale_record(scale)
+    entries, table, drawn = [], [], True
     for env, algo, seeds, k in RUNS:
+        name = f"{env}-{algo}"
+        if chosen is not None and name not in chosen:
+            if name not in earlier:
+                _refuse(f"--runs: no earlier row for {name} in {out / 'targets.json'}")
+            table.append(earlier[name])
+            drawn = False
+            continue
         config = run_config(scale, env, algo, seeds, k)
         if config is None:
             table.append({"env": env, "algo": algo, "status": "pending"})
             continue
-        out = run_dir(results, scale, config)
-        entry = {"env": env, "algo": algo, "status": "done", "dir": out, "config": config}
-        entry["summary"] = common.ensure_run(config, out)
+        run = run_dir(results, scale, config)
+        entry = {"env": env, "algo": algo, "status": "done", "dir": run, "config": config}
+        entry["summary"] = common.ensure_run(config, run)
         entries.append(entry)
-        table.append(pendulum_row(entry) if env == "inverted_pendulum" else cheetah_row(entry))
-    out = common.out_dir(results, "targets")
-    record = {**common.scale_record(scale), "rows": table}
-    common.write_json(out / "targets.json", record)
-    curves(entries, out / "targets.png")
+        row = pendulum_row(entry) if env == "inverted_pendulum" else cheetah_row(entry)
+        table.append({"date": _finished(run), **row})
+    if drawn:
+        curves(entries, out / "targets.png")
+        record["curves_date"] = record["machine"]["date"]
+    else:
+        record["curves_date"] = earlier_record.get("curves_date", earlier_record["machine"]["date"])
+    common.write_json(out / "targets.json", {**record, "rows": table})
     met = sum(bool(r.get("met")) for r in table)
-    print(f"wrote {out}/targets.json, targets.png ({met}/{len(table)} targets met)")
+    drew = "targets.png" if drawn else "not targets.png (rows kept from earlier runs)"
+    print(f"wrote {out}/targets.json and {drew} ({met}/{len(table)} targets met)")
     return 0
 
 
