@@ -37,7 +37,6 @@ import jax
 import jax.numpy as jnp
 
 from experiments.paper.shadow import load_run
-from ldn_jax.envs.mujoco import EnvState, _nv, _qpos0, engine
 from ldn_jax.learning_degree import ensemble_mean
 
 TASKS = ("halfcheetah", "hopper", "walker2d")
@@ -45,17 +44,10 @@ TASKS = ("halfcheetah", "hopper", "walker2d")
 
 def true_world(env, params):
     """`(key, obs [N, d], action [N, a]) -> (next_obs, reward, terminated)` of the true env
-    put in the state each observation describes (x position 0)."""
-    sim = engine(params.task, params.backend)
-    nq, nv = len(_qpos0(params.task)), _nv(params.task)
-
-    def state_of(obs):
-        qpos = jnp.concatenate([jnp.zeros(1), obs[: nq - 1]])
-        engine_state, physics = sim.reset(qpos, obs[nq - 1 : nq - 1 + nv])
-        return EnvState(engine=engine_state, physics=physics, time=jnp.zeros((), jnp.int32))
+    put in the state each observation describes (`MujocoEnv.from_observation`, x position 0)."""
 
     def step(key, obs, action):
-        states = jax.vmap(state_of)(obs)
+        states = jax.vmap(env.from_observation, (0, None))(obs, params)
         keys = jax.random.split(key, obs.shape[0])
         next_obs, _, reward, terminated, _, _ = jax.vmap(env.step, (0, 0, 0, None))(
             keys, states, action, params
@@ -153,18 +145,81 @@ def seed_errors(trainer, state, key, steps: int, starts: int, recent: int) -> li
     return rows
 
 
+def action_ranking(trainer, state, key, steps: int, starts: int, actions: int, recent: int) -> dict:
+    """How well the model's branches tell the first action's worth apart, which is all a
+    policy gradient takes from a branch's first row: from each start, `actions` first actions
+    of the policy, each followed by `steps` - 1 more of the policy's on the model's states; the
+    true env runs through the same actions. Per start, each branch's `steps`-step return
+    (rewards, then the critic at the cut) is centred over its actions (an advantage); pooled
+    over the starts:
+    - `spread`: the true advantages' std, in the learner's units;
+    - `reward_share`: the share of the true advantages' variance the rewards carry (the rest
+      is the critic at the cut: what the branch learns from its own evidence, against what it
+      takes on the critic's word), cov(rewards, G) / var(G);
+    - `model_true_correlation`: of the model's advantages with the true ones (1: the model
+      ranks actions as the world does);
+    - `error`: the mean |model - true| advantage, beside `spread`."""
+    buffer = state.buffer
+    size = int(buffer.size)
+    k_start, key = jax.random.split(key)
+    picked = buffer.data.obs[jax.random.randint(k_start, (starts,), max(0, size - recent), size)]
+    obs = jnp.repeat(picked, actions, axis=0)  # [starts * actions, d]: each start's copies
+    rows = obs.shape[0]
+    model = trainer._model_world(state, jnp.float32(1.0))
+    true = true_world(trainer.env, trainer.env_params)
+    learner, params, live = trainer.learner, state.learner.params, jnp.ones(rows, bool)
+    gamma = trainer.config.agent.gamma
+    units = 1.0
+    if "reward_norm" in params:
+        units = 1.0 / jnp.sqrt(params["reward_norm"]["var"][0] + 1e-8)
+    imagined, real = obs, obs
+    m_sum, r_sum = jnp.zeros(rows), jnp.zeros(rows)
+    m_alive, r_alive = jnp.ones(rows), jnp.ones(rows)
+    for t in range(steps):
+        key, k_act, k_model, k_env = jax.random.split(key, 4)
+        action = learner.env_action(learner.act(params, k_act, imagined))
+        m_obs, _, m_reward, m_term, _, _ = model(k_model, None, imagined, action, live)
+        real, r_reward, r_term = true(k_env, real, action)
+        m_sum = m_sum + m_alive * gamma**t * units * m_reward
+        r_sum = r_sum + r_alive * gamma**t * units * r_reward
+        m_alive, r_alive = m_alive * (1 - m_term), r_alive * (1 - r_term)
+        imagined = m_obs
+    m_return = m_sum + m_alive * gamma**steps * learner.value(params, imagined)
+    r_critic = r_alive * gamma**steps * learner.value(params, real)
+
+    def centred(x):
+        x = x.reshape(starts, actions)
+        return x - jnp.mean(x, axis=1, keepdims=True)
+
+    m_adv, g_adv, rewards = centred(m_return), centred(r_sum + r_critic), centred(r_sum)
+    variance = jnp.mean(jnp.square(g_adv))
+    return {
+        "steps": steps,
+        "actions": actions,
+        "spread": float(jnp.sqrt(variance)),
+        "reward_share": float(jnp.mean(rewards * g_adv) / variance),
+        "model_true_correlation": float(
+            jnp.mean(m_adv * g_adv) / jnp.sqrt(jnp.mean(jnp.square(m_adv)) * variance)
+        ),
+        "error": float(jnp.mean(jnp.abs(m_adv - g_adv))),
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("run", type=Path)
     parser.add_argument("--steps", type=int, default=5, help="imagined steps (default 5)")
     parser.add_argument("--starts", type=int, default=512, help="branches per seed")
     parser.add_argument("--recent", type=int, default=20_000, help="draw from the newest N")
+    parser.add_argument(
+        "--actions", type=int, default=16, help="first actions per start in the ranking test"
+    )
     args = parser.parse_args(argv)
     config, trainer, states = load_run(args.run)
     if config.env not in TASKS or not config.algorithm.uses_model:
         print(f"a model-based run on one of {', '.join(TASKS)} is needed", file=sys.stderr)
         return 2
-    seeds = []
+    seeds, ranking = [], []
     for seed in range(config.seeds):
         state = jax.tree.map(lambda x, s=seed: x[0, s], states)
         rows = seed_errors(
@@ -195,7 +250,25 @@ def main(argv: list[str] | None = None) -> int:
             f"{last['return_error_open_loop']:.3f} (spread {last['return_spread']:.3f})",
             flush=True,
         )
+        ranks = action_ranking(
+            trainer,
+            state,
+            jax.random.key(1000 + seed),
+            args.steps,
+            args.starts // 2,
+            args.actions,
+            args.recent,
+        )
+        ranking.append(ranks)
+        print(
+            f"seed {seed}: first actions' {args.steps}-step advantages over {args.actions} "
+            f"actions per start: spread {ranks['spread']:.3f}, rewards' share "
+            f"{ranks['reward_share']:.2f}, model against true: correlation "
+            f"{ranks['model_true_correlation']:.2f}, error {ranks['error']:.3f}",
+            flush=True,
+        )
     record = {"env": config.env, "algo": config.algo, **vars(args), "seeds": seeds}
+    record["action_ranking"] = ranking
     record["run"] = str(args.run)
     (args.run / "model_error.json").write_text(json.dumps(record, indent=1) + "\n")
     print(f"wrote {args.run / 'model_error.json'}")

@@ -35,6 +35,9 @@ paper's), or a state of the real buffer (branched, ours in the style of MBPO).""
 IMAGINED_STEPS = ("sample", "mean")
 """What a probabilistic ensemble's imagined step is (`ModelConfig.imagined_step`)."""
 
+WORLDS = ("model", "true")
+"""What steps imagined rollouts (`ModelConfig.world`)."""
+
 IMAGINED_STD = ("learn", "real")
 """What branched imagination's updates do to a state-independent log std
 (`ModelConfig.imagined_std`)."""
@@ -304,6 +307,13 @@ class ModelConfig:
     Gaussian of one elite picked at random; "mean": the elites' mean prediction, no draw (a
     simulator is deterministic, and the drawn noise is about half of a hopper model's
     one-step reward error: docs/benchmarks.md)."""
+    world: str = "model"
+    """One of `WORLDS`. "model": imagined steps are the model's predictions (the method).
+    "true", for studies: the real simulator stepped from each imagined observation stands in
+    for the model's prediction (next observation, reward, termination), so imagination is
+    what a perfect model would give, an upper bound, at no cost in real steps; the model is
+    still fitted, and the learning degree and the stopping rules still read it. Needs an env
+    whose observation is its state (`Env.from_observation`)."""
     hidden_layers: int = 1
     """`probabilistic`: hidden layers of each member's net, `hidden` units each (the
     paper's model is two nets of one hidden layer, kept when not probabilistic)."""
@@ -877,6 +887,12 @@ def validate(config: Config) -> Config:
             model.imagined_step == "sample" or model.probabilistic,
             "imagined_step 'mean' is a probabilistic ensemble's: it needs model.probabilistic",
         ),
+        (model.world in WORLDS, f"unknown world {model.world!r}; valid: {', '.join(WORLDS)}"),
+        (
+            model.world != "true" or _observes_state(config.env),
+            f"world 'true' steps the real env from imagined observations, and {config.env}'s "
+            f"observation is not its whole state{OBSERVES_STATE}",
+        ),
         (0 < model.m2ac_keep <= 1, f"m2ac_keep must be in (0, 1], got {model.m2ac_keep}"),
         (model.oracle_error > 0, f"oracle_error must be > 0, got {model.oracle_error}"),
         *_stop_checks(config),
@@ -946,16 +962,21 @@ def _stop_checks(config: Config) -> list[tuple[bool, str]]:
         (
             stop != "oracle" or _observes_state(config.env),
             f"stop 'oracle' steps the real env from imagined observations, and {config.env}'s "
-            "observation is not its whole state (CartPole's is)",
+            f"observation is not its whole state{OBSERVES_STATE}",
         ),
     ]
+
+
+OBSERVES_STATE = " (CartPole's, inverted_pendulum's, halfcheetah's, hopper's and walker2d's are)"
 
 
 def _observes_state(env: str) -> bool:
     """Whether the env can be stepped from an observation (`Env.from_observation`)."""
     if env not in envs.names():
         return True  # `validate` reports the unknown name
-    env_obj, _ = envs.make(env)
+    env_obj, params = envs.make(env)
+    if hasattr(env_obj, "observes_state"):
+        return env_obj.observes_state(params)
     return hasattr(env_obj, "from_observation")
 
 

@@ -50,9 +50,14 @@ def model_world(
     env_reward: Any,
     gain: Array,
     stop: StopRule,
+    true_step: Any = None,
 ) -> WorldStep:
     """A world that steps M1 (an ensemble: its members' mean prediction). Its extras carry
     each step's learning degree `ld`.
+
+    `true_step(key, obs, action) -> (next_obs, reward, terminated)`, if not None, is the real
+    env stepped from the imagined observations (`ModelConfig.world` "true"): it gives each
+    step in place of the model's prediction, which the learning degree and `stop` still read.
 
     `env_reward(obs, action, next_obs)`, if not None, replaces the model's reward (the LD
     still reads the models' whole output). `model_action` encodes the env action as the
@@ -81,8 +86,12 @@ def model_world(
             reward = env_reward(obs, action, next_obs)
         view = StepView(obs, action, next_obs, p_stop, statistic, alive)
         ends = stop(key, view)
-        outside = ~dynamics.within_bounds(model, next_obs)
         terminated = is_terminal(next_obs)
+        outside = ~dynamics.within_bounds(model, next_obs)
+        if true_step is not None:
+            k_true = jax.random.fold_in(key, TRUE_STREAM)
+            next_obs, reward, terminated = true_step(k_true, obs, action)
+            outside = jnp.zeros_like(outside)
         extras = {"ld": ld}
         if model.bounds is not None:
             extras["outside"] = outside & ~terminated
@@ -112,6 +121,10 @@ class StepView:
 MODEL_STREAM = 0x5EED
 """`jax.random.fold_in` data of a probabilistic model's draws (which member, which sample)
 in each imagined step: a branch off the step's key, which the stopping rule draws from."""
+
+TRUE_STREAM = 0x7E11
+"""`jax.random.fold_in` data of the real env's step in a world that steps it
+(`ModelConfig.world` "true")."""
 
 StopRule = Callable[[Array, StepView], Array]
 """`(key, step) -> stop [W]` bool: end the episode after this step (a truncation)."""

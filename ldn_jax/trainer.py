@@ -389,14 +389,21 @@ class Trainer:
             self._env_reward(),
             gain,
             stop_rule(self.config.model, rule, true_next, threshold),
+            self._true_step if self.config.model.world == "true" else None,
         )
 
-    def _true_next(self, key: Array, obs: Array, action: Array) -> Array:
-        """The real env's next observations from imagined ones, `[W, d]` (the oracle stop)."""
+    def _true_step(self, key: Array, obs: Array, action: Array) -> tuple[Array, Array, Array]:
+        """The real env stepped from imagined observations `[W, d]`: next observations,
+        rewards and terminations (the oracle stop, `model.world` "true")."""
         states = jax.vmap(self.env.from_observation, (0, None))(obs, self.env_params)
         keys = jax.random.split(key, obs.shape[0])
         step = jax.vmap(self.env.step, (0, 0, 0, None))
-        return step(keys, states, action, self.env_params)[0]
+        next_obs, _, reward, terminated, _, _ = step(keys, states, action, self.env_params)
+        return next_obs, reward, terminated
+
+    def _true_next(self, key: Array, obs: Array, action: Array) -> Array:
+        """The real env's next observations from imagined ones, `[W, d]` (the oracle stop)."""
+        return self._true_step(key, obs, action)[0]
 
     def _env_reward(self):
         """The env's exact reward `(obs, action, next_obs) -> [...]`, if used and known."""

@@ -386,15 +386,16 @@ def test_every_task_plays_gymnasiums_step_limit_and_the_paper_reacher_its_1000()
     assert Trainer(cartpole).max_steps == 7 and cartpole.steps_per_iteration == 10
 
 
-@pytest.mark.parametrize("task", ["halfcheetah", "hopper"])
-def test_the_model_error_tools_true_world_steps_from_an_observation_as_the_env_does(task):
-    """`experiments.model_error` puts the true env in the state an observation describes (x
-    position 0) and steps it: from the observations of a real rollout it must give the
-    rollout's own next observations and rewards (x is not observed and rewards move with its
-    change, not its value)."""
+@pytest.mark.parametrize("task", ["halfcheetah", "hopper", "inverted_pendulum"])
+def test_a_state_rebuilt_from_an_observation_steps_as_the_env_does(task):
+    """`from_observation` puts the env in the state an observation describes (x position 0):
+    stepped from the observations of a real rollout it must give the rollout's own next
+    observations and rewards (x is not observed and rewards move with its change, not its
+    value). `experiments.model_error` and `model.world` "true" step imagined states so."""
     from experiments.model_error import true_world
 
     env, params = _params(task)
+    assert env.observes_state(params)
     keys = jax.random.split(jax.random.key(3), 4)
     actions = jnp.asarray(_grid_actions(np.random.default_rng(2), 4, SIZES[task][1]))
 
@@ -409,3 +410,13 @@ def test_the_model_error_tools_true_world_steps_from_an_observation_as_the_env_d
     np.testing.assert_allclose(got_obs, want_obs, rtol=1e-4, atol=1e-4)
     np.testing.assert_allclose(got_reward, want_reward, rtol=1e-4, atol=1e-4)
     np.testing.assert_array_equal(got_term, want_term)
+    # A step off is not within the tolerance (the test can fail).
+    assert np.abs(np.asarray(got_obs) - np.asarray(obs)).max() > 1e-3
+
+
+@pytest.mark.parametrize("task", ["ant", "reacher"])
+def test_a_task_whose_observation_is_not_its_state_is_not_rebuilt_from_one(task):
+    env, params = _params(task)
+    assert not env.observes_state(params)
+    with pytest.raises(ValueError, match="observation is not its state"):
+        env.from_observation(jnp.zeros(SIZES[task][0]), params)

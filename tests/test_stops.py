@@ -106,6 +106,32 @@ def test_the_oracle_steps_the_real_cartpole_from_imagined_states():
     assert float(truth[0, 1]) < 0 < float(truth[1, 1])  # force -10 slows, +10 speeds the cart
 
 
+def test_a_true_world_steps_the_real_env_where_the_model_would_and_still_reads_the_model():
+    """`model.world` "true": each imagined step is the real CartPole's from the imagined
+    state (next observation, reward, termination), while the learning degree is still the
+    model's; the default world steps the untrained model, which is far off."""
+    obs = jnp.array([[0.0, 0.0, 0.0, 0.0], [0.01, 0.1, -0.02, 0.3], [0.0, 0.0, 0.2, 1.0]])
+    action = jnp.array([0, 1, 1])
+    key, alive = jax.random.key(1), jnp.ones(3, bool)
+    steps = {}
+    for world in ("model", "true"):
+        config = from_preset(
+            "paper", env="cartpole-v1", algo="ldn", seeds=1, model={"world": world}
+        )
+        trainer = Trainer(config)
+        state = jax.tree.map(lambda x: x[0, 0], trainer.init_batch())
+        step = trainer._model_world(state, jnp.float32(1.0))
+        steps[world] = step(key, None, obs, action, alive)
+    next_obs, _, reward, terminated, _, extras = steps["true"]
+    truth, true_reward, true_term = trainer._true_step(jax.random.key(9), obs, action)
+    np.testing.assert_array_equal(np.asarray(next_obs), np.asarray(truth))
+    np.testing.assert_array_equal(np.asarray(reward), np.asarray(true_reward))
+    np.testing.assert_array_equal(np.asarray(terminated), [False, False, True])
+    np.testing.assert_array_equal(np.asarray(terminated), np.asarray(true_term))
+    np.testing.assert_array_equal(np.asarray(extras["ld"]), np.asarray(steps["model"][5]["ld"]))
+    assert np.abs(np.asarray(steps["model"][0]) - np.asarray(truth)).max() > 1e-3
+
+
 @pytest.mark.parametrize(
     "encoding, expected",
     [
@@ -146,9 +172,14 @@ def build(*argv):
         (["--algo", "ldn", "--stop", "m2ac", "--m2ac-keep", "0"], "m2ac_keep must be in (0, 1]"),
         (["--algo", "ldn", "--stop", "oracle", "--oracle-error", "-1"], "oracle_error must be > 0"),
         (
-            ["--env", "inverted_pendulum", "--algo", "ldn", "--stop", "oracle"],
-            "inverted_pendulum's observation is not its whole state",
+            ["--env", "ant", "--algo", "ldn", "--stop", "oracle"],
+            "ant's observation is not its whole state",
         ),
+        (
+            ["--env", "reacher", "--algo", "ldn", "--set", "model.world=true"],
+            "world 'true' steps the real env from imagined observations, and reacher's",
+        ),
+        (["--algo", "ldn", "--set", "model.world=perfect"], "unknown world 'perfect'"),
         (
             ["--env", "inverted_pendulum", "--algo", "ldn", "--action-encoding", "force"],
             "action_encoding is for discrete actions",

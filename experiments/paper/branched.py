@@ -8,8 +8,10 @@ ensemble, `docs/training.md`), every rule that can end a branch, side by side wi
 learner alone at the same constants: no rule under fixed caps of 1, 5 and 15 steps, MBPO's
 horizon schedule, the LD draw (disagreement and predicted-variance readings) under a cap of
 15, M2AC's mask and MACURA's threshold under the same cap; and the cap of 5 with the
-policy's log std left to the real updates (`model.imagined_std` "real") or the elites' mean
-as each imagined step (`model.imagined_step` "mean"), which are not rules. Per rule
+policy's log std left to the real updates (`model.imagined_std` "real"), the elites' mean
+as each imagined step (`model.imagined_step` "mean"), or the real simulator stepped from the
+imagined states in the model's place (`model.world` "true": what a perfect model would give),
+which are not rules. Per rule
 and env: IQM [95% interval] of the final moving return and of the greedy return after training,
 P(improvement) of the greedy return over PPO and over the best fixed cap, imagined steps per
 real step, and training seconds.
@@ -68,12 +70,17 @@ RULES = {
         {"horizon": 5, "imagined_std": "real"},
         "no rule, cut at 5 steps, log std from real updates only",
     ),
+    "true-5": (
+        "ppo-model",
+        {"horizon": 5, "world": "true"},
+        "the real simulator in the model's place, cut at 5 (a perfect model's bound)",
+    ),
 }
 """Rule -> (algorithm, model fields over the preset's, how the report names it)."""
 
 CAPS = ("cap-1", "cap-5", "cap-15")
 
-ONLY = {"std-real": ("hopper", "halfcheetah")}
+ONLY = {"std-real": ("hopper", "halfcheetah"), "true-5": ("hopper", "halfcheetah")}
 """Rules run on some envs only: inverted_pendulum's PPO has a state-dependent std."""
 
 

@@ -136,6 +136,24 @@ class MujocoEnv:
             {},
         )
 
+    def observes_state(self, params: EnvParams) -> bool:
+        """Whether `from_observation` can rebuild the task's state from an observation."""
+        return TASKS[params.task].hidden_qpos is not None
+
+    def from_observation(self, obs: Array, params: EnvParams) -> EnvState:
+        """The state whose observation is `obs [O]`, at time 0, with the qpos entries the
+        observation leaves out (the x position) at 0: the real env stepped from an imagined
+        state (the oracle stop, `model.world` "true"). hopper's and walker2d's velocities
+        are clipped to +-10 in the observation, so there it is exact below that. Raises
+        ValueError (at trace time) for a task whose observation is not its state."""
+        task, sim = TASKS[params.task], engine(params.task, params.backend)
+        if task.hidden_qpos is None:
+            raise ValueError(f"{params.task}'s observation is not its state")
+        nq, nv, hidden = len(_qpos0(params.task)), _nv(params.task), task.hidden_qpos
+        qpos = jnp.concatenate([jnp.zeros(hidden, obs.dtype), obs[: nq - hidden]])
+        state, physics = sim.reset(qpos, obs[nq - hidden : nq - hidden + nv])
+        return EnvState(engine=state, physics=physics, time=jnp.zeros((), jnp.int32))
+
     def is_terminal(self, obs: Array, params: EnvParams) -> Array:
         return TASKS[params.task].is_terminal(obs)
 

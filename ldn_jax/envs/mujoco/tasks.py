@@ -126,6 +126,11 @@ class Task:
     """The task reads `cfrc_ext` (computed after each step)."""
     step_limit: int = 1000
     """Gymnasium's episode step limit for the task (its `max_episode_steps`)."""
+    hidden_qpos: int | None = None
+    """Where the observation is the physics state but for the first `hidden_qpos` entries of
+    qpos (the x position, which no reward or test reads but as a difference): how many; the
+    state rebuilt from an observation puts them at 0 (`MujocoEnv.from_observation`). None: the
+    observation is not the state (ant's contact forces, reacher's target)."""
 
 
 def _never(obs: Array) -> Array:
@@ -282,6 +287,7 @@ TASKS: dict[str, Task] = {
         reward=_cheetah_reward,
         terminated=lambda p: jnp.zeros((), bool),
         is_terminal=_never,
+        hidden_qpos=1,
     ),
     "hopper": Task(
         gymnasium_id="Hopper-v5",
@@ -295,6 +301,7 @@ TASKS: dict[str, Task] = {
         reward=_locomotion_reward(_hopper_healthy),
         terminated=lambda p: ~_hopper_healthy(p),
         is_terminal=lambda obs: ~_hopper_healthy_obs(obs),
+        hidden_qpos=1,
     ),
     "reacher": Task(
         gymnasium_id="Reacher-v5",
@@ -324,6 +331,7 @@ TASKS: dict[str, Task] = {
         reward=_locomotion_reward(_walker_healthy),
         terminated=lambda p: ~_walker_healthy(p),
         is_terminal=lambda obs: ~_walker_healthy_obs(obs),
+        hidden_qpos=1,
     ),
     "inverted_pendulum": Task(
         gymnasium_id="InvertedPendulum-v5",
@@ -340,6 +348,7 @@ TASKS: dict[str, Task] = {
         terminated=lambda p: _pendulum_is_terminal(_pendulum_obs(p)),
         is_terminal=_pendulum_is_terminal,
         reward_from_obs=_pendulum_reward_from_obs,
+        hidden_qpos=0,
     ),
 }
 """Our names -> gymnasium v5's definitions."""
