@@ -225,7 +225,8 @@ class ModelConfig:
     until `horizon_from` real steps, `horizon_max` from `horizon_to`, linear between.
     "oracle": stop where the true one-step error, ||M1(s, a) - env(s, a)|| on the next
     observation with the real env stepped from the imagined state, exceeds `oracle_error`:
-    the ceiling of any estimator (envs whose observation is their state: CartPole).
+    the ceiling of any estimator (envs whose observation is their state: CartPole,
+    inverted_pendulum, halfcheetah, hopper, walker2d).
     "none": only predicted termination and the step limit (A3C-Model)."""
     horizon: int = 5
     """`stop` "horizon": imagined steps per episode (MBPO's h; h in {1, 5, 25} is the study)."""

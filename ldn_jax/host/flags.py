@@ -193,7 +193,8 @@ def parser() -> Parser:
         help="what ends an imagined episode early: ld (the learning-degree draw, MBRL-LDN; "
         "--ld picks its estimator), m2ac (keep the --m2ac-keep share of running rollouts the "
         "ensemble is surest of, each step), horizon (cut after --horizon steps, MBPO), oracle "
-        "(stop where the true one-step error exceeds --oracle-error; CartPole) or none "
+        "(stop where the true one-step error exceeds --oracle-error; envs whose observation "
+        "is their state) or none "
         "(A3C-Model) (default: ld for ldn and ppo-ldn, none for a2c-model and ppo-model)",
     )
     p.add_argument(
