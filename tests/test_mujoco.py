@@ -414,6 +414,35 @@ def test_a_state_rebuilt_from_an_observation_steps_as_the_env_does(task):
     assert np.abs(np.asarray(got_obs) - np.asarray(obs)).max() > 1e-3
 
 
+def test_the_action_ranking_of_a_perfect_model_is_the_true_one():
+    """`experiments.model_error.action_ranking` with the real simulator in the model's place
+    (`model.world` "true"): the imagined advantages are the true ones (correlation 1, no
+    error); the untrained model's are not."""
+    from experiments.model_error import action_ranking
+    from ldn_jax.config import from_preset
+    from ldn_jax.trainer import Trainer
+
+    found = {}
+    for world in ("true", "model"):
+        config = from_preset(
+            "branched", env="inverted_pendulum", algo="ppo-model", seeds=1, model={"world": world}
+        )
+        trainer = Trainer(config)
+        state = jax.tree.map(lambda x: x[0, 0], trainer.init_batch())
+        reset = functools.partial(trainer.env.reset, params=trainer.env_params)
+        starts = jax.vmap(reset)(jax.random.split(jax.random.key(5), 64))[0]
+        buffer = state.buffer
+        obs = buffer.data.obs.at[:64].set(starts)
+        buffer = buffer.replace(data=buffer.data.replace(obs=obs), size=jnp.int32(64))
+        found[world] = action_ranking(
+            trainer, state.replace(buffer=buffer), jax.random.key(1), 3, 8, 8, 64
+        )
+    assert found["true"]["spread"] > 0
+    assert found["true"]["model_true_correlation"] == pytest.approx(1.0, abs=1e-4)
+    assert found["true"]["error"] == pytest.approx(0.0, abs=1e-5)
+    assert found["model"]["error"] > 10 * found["true"]["error"] + 1e-3
+
+
 @pytest.mark.parametrize("task", ["ant", "reacher"])
 def test_a_task_whose_observation_is_not_its_state_is_not_rebuilt_from_one(task):
     env, params = _params(task)
