@@ -35,7 +35,7 @@ paper's), or a state of the real buffer (branched, ours in the style of MBPO).""
 IMAGINED_STEPS = ("sample", "mean")
 """What a probabilistic ensemble's imagined step is (`ModelConfig.imagined_step`)."""
 
-WORLDS = ("model", "true")
+WORLDS = ("model", "true", "true-reward")
 """What steps imagined rollouts (`ModelConfig.world`)."""
 
 IMAGINED_STD = ("learn", "real")
@@ -314,7 +314,9 @@ class ModelConfig:
     for the model's prediction (next observation, reward, termination), so imagination is
     what a perfect model would give, an upper bound, at no cost in real steps; the model is
     still fitted, and the learning degree and the stopping rules still read it. Needs an env
-    whose observation is its state (`Env.from_observation`)."""
+    whose observation is its state (`Env.from_observation`). "true-reward": the model's next
+    observation with the real env's reward and termination from the imagined state (which of
+    the two a perfect model's gain comes from)."""
     hidden_layers: int = 1
     """`probabilistic`: hidden layers of each member's net, `hidden` units each (the
     paper's model is two nets of one hidden layer, kept when not probabilistic)."""
@@ -890,9 +892,9 @@ def validate(config: Config) -> Config:
         ),
         (model.world in WORLDS, f"unknown world {model.world!r}; valid: {', '.join(WORLDS)}"),
         (
-            model.world != "true" or _observes_state(config.env),
-            f"world 'true' steps the real env from imagined observations, and {config.env}'s "
-            f"observation is not its whole state{OBSERVES_STATE}",
+            model.world == "model" or _observes_state(config.env),
+            f"world {model.world!r} steps the real env from imagined observations, and "
+            f"{config.env}'s observation is not its whole state{OBSERVES_STATE}",
         ),
         (0 < model.m2ac_keep <= 1, f"m2ac_keep must be in (0, 1], got {model.m2ac_keep}"),
         (model.oracle_error > 0, f"oracle_error must be > 0, got {model.oracle_error}"),

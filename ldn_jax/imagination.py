@@ -51,13 +51,16 @@ def model_world(
     gain: Array,
     stop: StopRule,
     true_step: Any = None,
+    true_state: bool = True,
 ) -> WorldStep:
     """A world that steps M1 (an ensemble: its members' mean prediction). Its extras carry
     each step's learning degree `ld`.
 
     `true_step(key, obs, action) -> (next_obs, reward, terminated)`, if not None, is the real
     env stepped from the imagined observations (`ModelConfig.world` "true"): it gives each
-    step in place of the model's prediction, which the learning degree and `stop` still read.
+    step in place of the model's prediction, which the learning degree and `stop` still read
+    (with `true_state` False: its reward and termination only, beside the model's next
+    observation).
 
     `env_reward(obs, action, next_obs)`, if not None, replaces the model's reward (the LD
     still reads the models' whole output). `model_action` encodes the env action as the
@@ -90,8 +93,9 @@ def model_world(
         outside = ~dynamics.within_bounds(model, next_obs)
         if true_step is not None:
             k_true = jax.random.fold_in(key, TRUE_STREAM)
-            next_obs, reward, terminated = true_step(k_true, obs, action)
-            outside = jnp.zeros_like(outside)
+            true_obs, reward, terminated = true_step(k_true, obs, action)
+            if true_state:
+                next_obs, outside = true_obs, jnp.zeros_like(outside)
         extras = {"ld": ld}
         if model.bounds is not None:
             extras["outside"] = outside & ~terminated

@@ -389,7 +389,8 @@ class Trainer:
             self._env_reward(),
             gain,
             stop_rule(self.config.model, rule, true_next, threshold),
-            self._true_step if self.config.model.world == "true" else None,
+            None if self.config.model.world == "model" else self._true_step,
+            true_state=self.config.model.world == "true",
         )
 
     def _true_step(self, key: Array, obs: Array, action: Array) -> tuple[Array, Array, Array]:

@@ -114,7 +114,7 @@ def test_a_true_world_steps_the_real_env_where_the_model_would_and_still_reads_t
     action = jnp.array([0, 1, 1])
     key, alive = jax.random.key(1), jnp.ones(3, bool)
     steps = {}
-    for world in ("model", "true"):
+    for world in ("model", "true", "true-reward"):
         config = from_preset(
             "paper", env="cartpole-v1", algo="ldn", seeds=1, model={"world": world}
         )
@@ -130,6 +130,12 @@ def test_a_true_world_steps_the_real_env_where_the_model_would_and_still_reads_t
     np.testing.assert_array_equal(np.asarray(terminated), np.asarray(true_term))
     np.testing.assert_array_equal(np.asarray(extras["ld"]), np.asarray(steps["model"][5]["ld"]))
     assert np.abs(np.asarray(steps["model"][0]) - np.asarray(truth)).max() > 1e-3
+    # "true-reward": the model's next observation, the real reward and termination.
+    np.testing.assert_array_equal(
+        np.asarray(steps["true-reward"][0]), np.asarray(steps["model"][0])
+    )
+    np.testing.assert_array_equal(np.asarray(steps["true-reward"][2]), np.asarray(true_reward))
+    np.testing.assert_array_equal(np.asarray(steps["true-reward"][3]), [False, False, True])
 
 
 @pytest.mark.parametrize(
@@ -178,6 +184,10 @@ def build(*argv):
         (
             ["--env", "reacher", "--algo", "ldn", "--set", "model.world=true"],
             "world 'true' steps the real env from imagined observations, and reacher's",
+        ),
+        (
+            ["--env", "ant", "--algo", "ldn", "--set", "model.world=true-reward"],
+            "world 'true-reward' steps the real env from imagined observations, and ant's",
         ),
         (["--algo", "ldn", "--set", "model.world=perfect"], "unknown world 'perfect'"),
         (
