@@ -57,6 +57,14 @@ def true_world(env, params):
     return step
 
 
+def reward_units(params):
+    """The learner's reward units: 1 over the running return's std where it normalises
+    rewards, else 1."""
+    if "reward_norm" not in params:
+        return 1.0
+    return 1.0 / jnp.sqrt(params["reward_norm"]["var"][0] + 1e-8)
+
+
 def seed_errors(trainer, state, key, steps: int, starts: int, recent: int) -> list[dict]:
     buffer = state.buffer
     size = int(buffer.size)
@@ -104,9 +112,7 @@ def seed_errors(trainer, state, key, steps: int, starts: int, recent: int) -> li
         real, real_reward, real_term = true(k_env, real, action)
         # One-step TD targets r + gamma V(s') in the learner's reward units, from the model's
         # prediction and from the true env, and how each covaries with `wide`.
-        units = 1.0
-        if "reward_norm" in params:
-            units = 1.0 / jnp.sqrt(params["reward_norm"]["var"][0] + 1e-8)
+        units = reward_units(params)
         discount = gamma**t
         m_sum = m_sum + m_alive * discount * units * m_reward
         r_sum = r_sum + r_alive * discount * units * real_reward
@@ -169,9 +175,7 @@ def action_ranking(trainer, state, key, steps: int, starts: int, actions: int, r
     true = true_world(trainer.env, trainer.env_params)
     learner, params, live = trainer.learner, state.learner.params, jnp.ones(rows, bool)
     gamma = trainer.config.agent.gamma
-    units = 1.0
-    if "reward_norm" in params:
-        units = 1.0 / jnp.sqrt(params["reward_norm"]["var"][0] + 1e-8)
+    units = reward_units(params)
     imagined, real = obs, obs
     m_sum, r_sum = jnp.zeros(rows), jnp.zeros(rows)
     m_alive, r_alive = jnp.ones(rows), jnp.ones(rows)
