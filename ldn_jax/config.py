@@ -35,7 +35,7 @@ paper's), or a state of the real buffer (branched, ours in the style of MBPO).""
 IMAGINED_STEPS = ("sample", "mean")
 """What a probabilistic ensemble's imagined step is (`ModelConfig.imagined_step`)."""
 
-WORLDS = ("model", "true", "true-reward")
+WORLDS = ("model", "true", "true-reward", "true-state")
 """What steps imagined rollouts (`ModelConfig.world`)."""
 
 IMAGINED_STD = ("learn", "real")
@@ -316,7 +316,8 @@ class ModelConfig:
     still fitted, and the learning degree and the stopping rules still read it. Needs an env
     whose observation is its state (`Env.from_observation`). "true-reward": the model's next
     observation with the real env's reward and termination from the imagined state (which of
-    the two a perfect model's gain comes from)."""
+    the two a perfect model's gain comes from); "true-state": the real next observation and
+    termination with the model's reward."""
     hidden_layers: int = 1
     """`probabilistic`: hidden layers of each member's net, `hidden` units each (the
     paper's model is two nets of one hidden layer, kept when not probabilistic)."""

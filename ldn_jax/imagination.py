@@ -52,15 +52,16 @@ def model_world(
     stop: StopRule,
     true_step: Any = None,
     true_state: bool = True,
+    true_reward: bool = True,
 ) -> WorldStep:
     """A world that steps M1 (an ensemble: its members' mean prediction). Its extras carry
     each step's learning degree `ld`.
 
     `true_step(key, obs, action) -> (next_obs, reward, terminated)`, if not None, is the real
     env stepped from the imagined observations (`ModelConfig.world` "true"): it gives each
-    step in place of the model's prediction, which the learning degree and `stop` still read
-    (with `true_state` False: its reward and termination only, beside the model's next
-    observation).
+    step in place of the model's prediction, which the learning degree and `stop` still read.
+    Its termination always replaces the model's; `true_state` False keeps the model's next
+    observation ("true-reward"), `true_reward` False the model's reward ("true-state").
 
     `env_reward(obs, action, next_obs)`, if not None, replaces the model's reward (the LD
     still reads the models' whole output). `model_action` encodes the env action as the
@@ -93,7 +94,9 @@ def model_world(
         outside = ~dynamics.within_bounds(model, next_obs)
         if true_step is not None:
             k_true = jax.random.fold_in(key, TRUE_STREAM)
-            true_obs, reward, terminated = true_step(k_true, obs, action)
+            true_obs, true_rewards, terminated = true_step(k_true, obs, action)
+            if true_reward:
+                reward = true_rewards
             if true_state:
                 next_obs, outside = true_obs, jnp.zeros_like(outside)
         extras = {"ld": ld}

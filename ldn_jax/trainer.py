@@ -390,7 +390,8 @@ class Trainer:
             gain,
             stop_rule(self.config.model, rule, true_next, threshold),
             None if self.config.model.world == "model" else self._true_step,
-            true_state=self.config.model.world == "true",
+            true_state=self.config.model.world in ("true", "true-state"),
+            true_reward=self.config.model.world in ("true", "true-reward"),
         )
 
     def _true_step(self, key: Array, obs: Array, action: Array) -> tuple[Array, Array, Array]:

@@ -109,12 +109,13 @@ def test_the_oracle_steps_the_real_cartpole_from_imagined_states():
 def test_a_true_world_steps_the_real_env_where_the_model_would_and_still_reads_the_model():
     """`model.world` "true": each imagined step is the real CartPole's from the imagined
     state (next observation, reward, termination), while the learning degree is still the
-    model's; the default world steps the untrained model, which is far off."""
+    model's; the default world steps the untrained model, which is far off. The hybrids take
+    the real termination and either the real reward or the real next observation."""
     obs = jnp.array([[0.0, 0.0, 0.0, 0.0], [0.01, 0.1, -0.02, 0.3], [0.0, 0.0, 0.2, 1.0]])
     action = jnp.array([0, 1, 1])
     key, alive = jax.random.key(1), jnp.ones(3, bool)
     steps = {}
-    for world in ("model", "true", "true-reward"):
+    for world in ("model", "true", "true-reward", "true-state"):
         config = from_preset(
             "paper", env="cartpole-v1", algo="ldn", seeds=1, model={"world": world}
         )
@@ -136,6 +137,11 @@ def test_a_true_world_steps_the_real_env_where_the_model_would_and_still_reads_t
     )
     np.testing.assert_array_equal(np.asarray(steps["true-reward"][2]), np.asarray(true_reward))
     np.testing.assert_array_equal(np.asarray(steps["true-reward"][3]), [False, False, True])
+    # "true-state": the real next observation and termination, the model's reward.
+    np.testing.assert_array_equal(np.asarray(steps["true-state"][0]), np.asarray(truth))
+    np.testing.assert_array_equal(np.asarray(steps["true-state"][2]), np.asarray(steps["model"][2]))
+    assert np.abs(np.asarray(steps["model"][2]) - np.asarray(true_reward)).max() > 1e-3
+    np.testing.assert_array_equal(np.asarray(steps["true-state"][3]), [False, False, True])
 
 
 @pytest.mark.parametrize(

@@ -11,9 +11,9 @@ horizon schedule, the LD draw (disagreement and predicted-variance readings) und
 policy's log std left to the real updates (`model.imagined_std` "real"), the elites' mean
 as each imagined step (`model.imagined_step` "mean"), the real simulator stepped from the
 imagined states in the model's place (`model.world` "true": what a perfect model would give;
-"true-reward": its reward and termination only), or eight times the model's fit steps, which
-are not rules. Per rule and env: IQM [95% interval] of the final moving return and of the
-greedy return after training,
+"true-reward": its reward and termination only; "true-state": its states and termination
+only), or eight times the model's fit steps, which are not rules. Per rule and env: IQM [95%
+interval] of the final moving return and of the greedy return after training,
 P(improvement) of the greedy return over PPO and over the best fixed cap, imagined steps per
 real step, and training seconds.
 
@@ -86,13 +86,19 @@ RULES = {
         {"horizon": 5, "world": "true-reward"},
         "the model's states with the real reward and termination, cut at 5",
     ),
+    "true-state-5": (
+        "ppo-model",
+        {"horizon": 5, "world": "true-state"},
+        "the real states and termination with the model's reward, cut at 5",
+    ),
 }
 """Rule -> (algorithm, model fields over the preset's, how the report names it)."""
 
 CAPS = ("cap-1", "cap-5", "cap-15")
 
 ONLY = {
-    rule: ("hopper", "halfcheetah") for rule in ("std-real", "fit-400", "true-5", "true-reward-5")
+    rule: ("hopper", "halfcheetah")
+    for rule in ("std-real", "fit-400", "true-5", "true-reward-5", "true-state-5")
 }
 """Rules run on some envs only: inverted_pendulum's PPO has a state-dependent std."""
 
