@@ -363,7 +363,10 @@ class Config:
     preset: str = "paper"
     """The preset these values started from (recorded for provenance)."""
     seeds: int = 5
-    """Number of seeds, vmapped; seed i uses PRNG key i."""
+    """Number of seeds, vmapped: seeds `first_seed` .. `first_seed + seeds - 1`."""
+    first_seed: int = 0
+    """The batch's first seed; seed s uses PRNG key s, so a run of seeds 5..9 (`--seeds 5
+    --first-seed 5`) trains what seeds 5..9 of a 10-seed run train and adds to one of 0..4."""
     k: tuple[float, ...] = (0.5, 1.0, 2.0)
     """Learning-degree gains K (eq. 6), vmapped; K=1 is eq. 4. An algorithm that does not
     stop by the learning degree keeps only the first (`from_preset`): K does nothing there."""
@@ -709,6 +712,7 @@ def validate(config: Config) -> Config:
     agent, model = config.agent, config.model
     checks = [
         (config.seeds >= 1, f"seeds must be >= 1, got {config.seeds}"),
+        (config.first_seed >= 0, f"first_seed must be >= 0, got {config.first_seed}"),
         (
             config.preset != "fast" or not _continuous(config.env),
             "preset 'fast' is for CartPole (measured there); MuJoCo tasks have their own defaults",

@@ -603,8 +603,8 @@ class Trainer:
     # -- seeds x K -------------------------------------------------------------------------
 
     def init_batch(self) -> TrainState:
-        """States `[P, S]` (P: `config.points`, the K values without a sweep): seed i gets
-        key i at every point (common random numbers). In a sweep each point starts from
+        """States `[P, S]` (P: `config.points`, the K values without a sweep): seed s gets
+        key s at every point (common random numbers). In a sweep each point starts from
         its own values (an optimiser state may hold its learning rate).
 
         Jitted, one program instead of some hundred eager ops (about 1.5 s per process on
@@ -612,7 +612,8 @@ class Trainer:
         return jax.jit(self._init_batch)()
 
     def _init_batch(self) -> TrainState:
-        keys = jax.vmap(jax.random.key)(jnp.arange(self.config.seeds))
+        first = self.config.first_seed
+        keys = jax.vmap(jax.random.key)(jnp.arange(first, first + self.config.seeds))
         if self.config.sweep:
             init = lambda point: jax.vmap(self._at_point(point)[0].init_state)(keys)
             return jax.vmap(init)(self.point_values())

@@ -12,6 +12,7 @@ from ldn_jax import load_policy
 from ldn_jax.host.training import Stop
 
 ROOT = Path(__file__).resolve().parents[1]
+OBS = np.random.default_rng(1).uniform(-0.2, 0.2, (20, 4)).astype(np.float32)
 RUN = [sys.executable, str(ROOT / "experiments" / "run.py")]
 
 
@@ -22,7 +23,9 @@ def _run(*args, timeout=300):
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory):
     out = tmp_path_factory.mktemp("run") / "ldn"
-    args = ["--env", "cartpole-v0", "--algo", "ldn", "--seeds", "2", "--k", "0.5,2"]
+    # Seeds 3 and 4: every file names the seeds themselves, not their place in the batch.
+    args = ["--env", "cartpole-v0", "--algo", "ldn", "--seeds", "2", "--first-seed", "3"]
+    args += ["--k", "0.5,2"]
     result = _run(*args, "--episodes", "16", "--workers", "4", "--chunk", "2", "--out", str(out))
     assert result.returncode == 0, result.stderr
     assert "summary.json" in result.stdout
@@ -35,6 +38,7 @@ def test_run_dir_files_and_fields(run_dir):
     assert (run_dir / "checkpoints" / "final").is_dir()
     config = json.loads((run_dir / "config.json").read_text())
     assert config["k"] == [0.5, 2.0] and config["seeds"] == 2 and config["algo"] == "ldn"
+    assert config["first_seed"] == 3
     lines = [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
     assert len(lines) == 2 * 2 * 4  # K x seeds x iterations
     fields = {
@@ -42,7 +46,7 @@ def test_run_dir_files_and_fields(run_dir):
         "moving_return", "ld_mean", "losses", "wall_seconds",
     }  # fmt: skip
     assert all(set(line) == fields for line in lines)
-    assert {(line["seed"], line["k"]) for line in lines} == {(0, 0.5), (1, 0.5), (0, 2), (1, 2)}
+    assert {(line["seed"], line["k"]) for line in lines} == {(3, 0.5), (4, 0.5), (3, 2), (4, 2)}
     assert lines[-1]["episodes"] == 16 and 0 <= lines[-1]["ld_mean"] < 1
     summary = json.loads((run_dir / "summary.json").read_text())
     assert {"env", "algo", "threshold", "compile_seconds", "train_seconds"} <= set(summary)
@@ -52,10 +56,11 @@ def test_run_dir_files_and_fields(run_dir):
         "final_moving_return", "eval_return", "solved", "diverged",
     }  # fmt: skip
     assert len(summary["runs"]) == 4 and all(set(r) == run_fields for r in summary["runs"])
+    assert {r["seed"] for r in summary["runs"]} == {3, 4}
 
 
 def test_load_policy_returns_python_ints(run_dir):
-    act = load_policy(run_dir, seed=1, k=2.0)
+    act = load_policy(run_dir, seed=4, k=2.0)
     rng = np.random.default_rng(0)
     actions = [act(rng.uniform(-0.05, 0.05, 4).astype(np.float32)) for _ in range(20)]
     assert all(type(a) is int and a in (0, 1) for a in actions)
@@ -63,6 +68,10 @@ def test_load_policy_returns_python_ints(run_dir):
     assert act(obs) == act(obs)
     with pytest.raises(ValueError, match="K=3"):
         load_policy(run_dir, k=3.0)
+    with pytest.raises(ValueError, match=r"seed 1 not in this run \(it has seeds 3\.\.4\)"):
+        load_policy(run_dir, seed=1)
+    first = load_policy(run_dir, k=2.0)  # the run's first seed, 3
+    assert [first(o) for o in OBS] == [load_policy(run_dir, seed=3, k=2.0)(o) for o in OBS]
 
 
 @pytest.mark.parametrize(

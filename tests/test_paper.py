@@ -498,6 +498,39 @@ def test_the_locomotion_study_states_each_tasks_ratio_to_the_zoo(tmp_path):
     assert (config.algo, config.seeds, config.steps) == ("ppo", 5, 1_000_000)
 
 
+def test_the_branched_study_adds_seeds_to_a_finished_run_and_merges_their_rows(
+    tmp_path, monkeypatch
+):
+    from experiments.paper import branched
+
+    finished = ("hopper-ld-s3-100", "hopper-ld-s5-100", "hopper-ld-s5+5-100")
+    for name in (*finished, "hopper-ld-s8-100", "hopper-ld-variance-s9-100"):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "config.json").write_text("{}")
+    monkeypatch.setattr(branched.RunDir, "is_finished", lambda run: run.path.name in finished)
+
+    def dirs(seeds):
+        return [
+            (a, b, p.name) for a, b, p in branched.run_dirs(tmp_path, "hopper", "ld", seeds, 100)
+        ]
+
+    assert dirs(10) == [(0, 5, "hopper-ld-s5-100"), (5, 5, "hopper-ld-s5+5-100")]
+    assert dirs(5) == [(0, 5, "hopper-ld-s5-100")]  # its own run, however many others there are
+    assert dirs(8) == [(0, 8, "hopper-ld-s8-100")]  # started: resumed, not split
+    assert dirs(4) == [(0, 3, "hopper-ld-s3-100"), (3, 1, "hopper-ld-s3+1-100")]
+    assert dirs(2) == [(0, 2, "hopper-ld-s2-100")]
+    rows = [
+        {"seeds": 5, "final_moving_return": [1.0] * 5, "eval_return": [2.0] * 5,
+         "steps_to_solve": None, "imagined_per_real": 4.0, "train_seconds": 10.0},
+        {"seeds": 3, "final_moving_return": [3.0] * 3, "eval_return": [4.0] * 3,
+         "steps_to_solve": None, "imagined_per_real": 0.0, "train_seconds": 5.0},
+    ]  # fmt: skip
+    row = branched.merged(rows)
+    assert row["final_moving_return"] == [1.0] * 5 + [3.0] * 3 and row["eval_return"][-1] == 4.0
+    assert (row["seeds"], row["imagined_per_real"], row["train_seconds"]) == (8, 2.5, 15.0)
+    assert branched.config_of("hopper", "ld", 5, 100, first_seed=5).first_seed == 5
+
+
 def test_the_branched_study_keeps_earlier_rows_and_names_each_envs_seeds(tmp_path):
     from experiments.paper import branched
 

@@ -205,6 +205,7 @@ def _config(**overrides):
 
 
 def _run_chunks(trainer, states, chunks=2):
+    states = trainer.init_batch() if states is None else states
     fn = trainer.batched_chunk()
     history = []
     for _ in range(chunks):
@@ -304,6 +305,17 @@ def test_vmapped_seeds_equal_seeds_run_one_by_one():
                 np.testing.assert_allclose(
                     value, chunk[name][0, seed], rtol=1e-5, atol=1e-6, err_msg=name
                 )
+
+
+def test_first_seed_trains_what_the_same_seeds_of_a_larger_batch_train():
+    """Seeds 2 and 3 alone (`first_seed` 2) are seeds 2 and 3 of a batch of 0..3, so a run of
+    more seeds adds to an earlier one. Equal to float32 rounding (batch sizes differ)."""
+    _, alone = _run_chunks(Trainer(_config(seeds=2, first_seed=2)), None)
+    _, batch = _run_chunks(Trainer(_config(seeds=4)), None)
+    for a, b in zip(alone, batch, strict=True):
+        for name in a:
+            np.testing.assert_allclose(a[name], b[name][:, 2:], rtol=1e-5, atol=1e-6, err_msg=name)
+        assert np.abs(b["episode_return"][:, 0] - b["episode_return"][:, 2]).max() > 0
 
 
 def _rule(ld_stop: bool):

@@ -19,7 +19,8 @@ real step, and training seconds.
 
 Writes DIR/branched/branched.json and branched.md (REPORT.md's section "Stopping rules with
 branched rollouts" is that file), keeping the rows of envs and rules not run this time; runs
-are cached in DIR/runs/branched/ and resumed.
+are cached in DIR/runs/branched/ and resumed; more seeds than a finished run has train only
+the seeds after its own (10 seeds: an earlier run of 5, and seeds 5..9).
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ import numpy as np
 from experiments.paper import common
 from ldn_jax.config import from_preset, validate
 from ldn_jax.host import stats
+from ldn_jax.host.run_dir import RunDir
 
 BUDGETS = {"inverted_pendulum": 30_000, "hopper": 200_000, "halfcheetah": 200_000}
 """Real env steps per seed of each env's runs (the issue's: inverted_pendulum 50k)."""
@@ -103,15 +105,52 @@ ONLY = {
 """Rules run on some envs only: inverted_pendulum's PPO has a state-dependent std."""
 
 
-def config_of(env: str, rule: str, seeds: int, steps: int):
+def config_of(env: str, rule: str, seeds: int, steps: int, first_seed: int = 0):
     algo, model, _ = RULES[rule]
     if model.get("stop") == "mbpo":
         model = {**model, **SCHEDULES[env]}
-    solved = SOLVED.get(env)
     config = from_preset(
-        "branched", env=env, algo=algo, seeds=seeds, steps=steps, model=model, solved_return=solved
+        "branched",
+        env=env,
+        algo=algo,
+        seeds=seeds,
+        first_seed=first_seed,
+        steps=steps,
+        model=model,
+        solved_return=SOLVED.get(env),
     )
     return validate(config)
+
+
+def run_dirs(runs: Path, env: str, rule: str, seeds: int, steps: int) -> list[tuple]:
+    """`(first seed, seeds, directory)` of the runs that make up `seeds` seeds of a rule: a
+    run of them all if one was started; else the finished run of the most seeds below
+    `seeds` in `runs`, if any, then one of the seeds after it (`first_seed`), so 10 seeds
+    reuse an earlier run of 5."""
+    whole = runs / f"{env}-{rule}-s{seeds}-{steps}"
+    if RunDir(whole).holds_run():
+        return [(0, seeds, whole)]
+    done = 0
+    for path in runs.glob(f"{env}-{rule}-s*-{steps}"):
+        count = path.name.removeprefix(f"{env}-{rule}-s").removesuffix(f"-{steps}")
+        if count.isdigit() and done < int(count) < seeds and RunDir(path).is_finished():
+            done = int(count)
+    parts = [(0, done, runs / f"{env}-{rule}-s{done}-{steps}")] if done else []
+    rest = f"s{seeds}" if not done else f"s{done}+{seeds - done}"
+    return [*parts, (done, seeds - done, runs / f"{env}-{rule}-{rest}-{steps}")]
+
+
+def merged(parts: list[dict]) -> dict:
+    """One row from rows of the same rule on consecutive seeds."""
+    row = dict(parts[0])
+    for name in ("final_moving_return", "eval_return", "steps_to_solve"):
+        if row[name] is not None:
+            row[name] = [x for part in parts for x in part[name]]
+    row["seeds"] = sum(part["seeds"] for part in parts)
+    imagined = sum(part["imagined_per_real"] * part["seeds"] for part in parts)
+    row["imagined_per_real"] = imagined / row["seeds"]
+    row["train_seconds"] = sum(part["train_seconds"] for part in parts)
+    return row
 
 
 def results_of(env: str, rule: str, out: Path, summary: dict, steps: int) -> dict:
@@ -237,6 +276,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--results", type=Path, default=common.RESULTS)
     args = parser.parse_args(argv)
     out = common.out_dir(args.results, "branched")
+    runs = args.results / "runs" / "branched"
     # Rows of earlier calls (other envs, rules or seeds) stay; this call's replace theirs.
     rows = {(r["env"], r["rule"]): r for r in _earlier(out / "branched.json")}
     for env in args.envs.split(","):
@@ -244,10 +284,11 @@ def main(argv: list[str] | None = None) -> int:
         for rule in args.rules.split(","):
             if env not in ONLY.get(rule, (env,)):
                 continue
-            config = config_of(env, rule, args.seeds, steps)
-            run = args.results / "runs" / "branched" / f"{env}-{rule}-s{args.seeds}-{steps}"
-            summary = common.ensure_run(config, run)
-            rows[env, rule] = results_of(env, rule, run, summary, steps)
+            parts = []
+            for first, seeds, run in run_dirs(runs, env, rule, args.seeds, steps):
+                summary = common.ensure_run(config_of(env, rule, seeds, steps, first), run)
+                parts.append(results_of(env, rule, run, summary, steps))
+            rows[env, rule] = merged(parts)
     envs, rules = list(BUDGETS), list(RULES)
     ordered = [
         rows[key] for key in sorted(rows, key=lambda k: (envs.index(k[0]), rules.index(k[1])))

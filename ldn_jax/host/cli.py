@@ -101,6 +101,8 @@ def _load(args: argparse.Namespace):
         if not sep:
             raise UsageError(f"--at needs FIELD=NUMBER, got {item!r}")
     # ValueError names the valid seeds, K and sweep values
+    if args.seed is None:
+        args.seed = config.first_seed
     act = load_policy(run_dir, args.seed, args.k, at)
     values = dict(config.points[point_index(config, args.k, at)])
     return config, act, values.pop("k"), values
@@ -163,7 +165,9 @@ def compare(argv: list[str]) -> int:
 def eval_parser() -> Parser:
     p = Parser(prog="ldn-jax eval", description=evaluate.__doc__)
     p.add_argument("run_dir", type=Path, help="a finished run directory")
-    p.add_argument("--seed", type=int, default=0, help="which trained seed (default 0)")
+    p.add_argument(
+        "--seed", type=int, default=None, help="which trained seed (default: the run's first, 0)"
+    )
     p.add_argument("--k", type=float, default=None, help="which K (default: the run's first)")
     p.add_argument(
         "--at",

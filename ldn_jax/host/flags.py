@@ -69,6 +69,7 @@ CONFIG_FLAGS = {
     "env": "env",
     "algo": "algo",
     "seeds": "seeds",
+    "first_seed": "first_seed",
     "k": "k",
     "episodes": "episodes",
     "steps": "steps",
@@ -120,7 +121,14 @@ def parser() -> Parser:
     p.add_argument(
         "--algo", help=f"one of: {', '.join(ALGORITHMS)} (default {d.algo}); or a comma list"
     )
-    p.add_argument("--seeds", type=int, help=f"number of vmapped seeds 0..N-1 (default {d.seeds})")
+    p.add_argument(
+        "--seeds", type=int, help=f"number of vmapped seeds S..S+N-1 (default {d.seeds})"
+    )
+    p.add_argument(
+        "--first-seed",
+        type=int,
+        help="S, the first seed (default 0): a run of seeds 5..9 adds to one of 0..4",
+    )
     p.add_argument("--k", help=f"comma-separated learning-degree gains K (default {_gains(d.k)})")
     p.add_argument(
         "--episodes",

@@ -27,10 +27,11 @@ STEP_METRICS = ("iteration", "episodes")
 
 
 def tag_prefix(config: Config, point: int, seed: int) -> str:
-    """`seed{S}_k{K}`, and in a sweep `_{field}={value}` for each swept field (e.g.
-    `seed0_k1_agent.actor_lr=0.0003`): the part of a metric's name that names its run."""
+    """`seed{S}_k{K}` (`seed`: the index in the batch, S: the seed), and in a sweep
+    `_{field}={value}` for each swept field (e.g. `seed0_k1_agent.actor_lr=0.0003`): the part
+    of a metric's name that names its run."""
     values = config.points[point]
-    return f"seed{seed}_k{values['k']:g}" + "".join(
+    return f"seed{config.first_seed + seed}_k{values['k']:g}" + "".join(
         f"_{name}={values[name]:g}" for name, _ in config.sweep
     )
 

@@ -13,9 +13,10 @@ from ldn_jax.trainer import Trainer
 
 
 def load_policy(
-    run_dir: str | Path, seed: int = 0, k: float | None = None, at: dict | None = None
+    run_dir: str | Path, seed: int | None = None, k: float | None = None, at: dict | None = None
 ) -> Callable[[np.ndarray], int | np.ndarray]:
-    """The greedy policy of one seed and K of a finished run.
+    """The greedy policy of one seed and K of a finished run (`seed=None`: its first seed,
+    0 unless it was trained with `first_seed`).
 
     Returns `act(obs)`: a numpy observation in; out a Python int (discrete actions) or a
     float32 numpy array within the action bounds (continuous: the Gaussian's mean).
@@ -24,13 +25,17 @@ def load_policy(
     """
     run = RunDir(run_dir)
     config = run.read_config()
-    if not 0 <= seed < config.seeds:
-        raise ValueError(f"seed {seed} not in this run (it has seeds 0..{config.seeds - 1})")
+    first = config.first_seed
+    seed = first if seed is None else seed
+    if not first <= seed < first + config.seeds:
+        raise ValueError(
+            f"seed {seed} not in this run (it has seeds {first}..{first + config.seeds - 1})"
+        )
     k_index = point_index(config, k, at)
     trainer = Trainer(config)
     like = jax.eval_shape(trainer.init_batch)
     state = run.restore_final(like)
-    params = jax.tree.map(lambda x: x[k_index, seed], state.learner.params)
+    params = jax.tree.map(lambda x: x[k_index, seed - first], state.learner.params)
     greedy = jax.jit(trainer.learner.greedy)
 
     if trainer.learner.policy.discrete:

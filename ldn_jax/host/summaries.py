@@ -23,7 +23,7 @@ LOSS_SUFFIXES = ("_loss", "_entropy", "_approx_kl", "_clip_fraction", "_kl_stopp
 def run_name(config: Config, point: int, seed: int) -> str:
     """How messages name one run of the batch: `seed 1 K=0.5`, or `seed 1` where K is unused,
     with a sweep's values (`seed 1 agent.actor_lr=0.0003`)."""
-    return " ".join(filter(None, [f"seed {seed}", config.point_name(point)]))
+    return " ".join(filter(None, [f"seed {config.first_seed + seed}", config.point_name(point)]))
 
 
 def point_fields(config: Config, point: int) -> dict:
@@ -51,7 +51,7 @@ def metric_lines(
                 at = lambda name, index=(ki, seed, i): metrics[name][index]
                 line = {
                     "iteration": first_iteration + i,
-                    "seed": seed,
+                    "seed": config.first_seed + seed,
                     **point_fields(config, ki),
                     "episodes": int(at("episodes")),
                     "env_steps": int(at("env_steps")),
@@ -128,7 +128,7 @@ def summarize(config: Config, history: dict, eval_returns, states, session: dict
                 seconds = begin + (chunk_ends[chunk] - begin) * (within + 1) / per_chunk
             runs.append(
                 {
-                    "seed": seed,
+                    "seed": config.first_seed + seed,
                     **point_fields(config, ki),
                     "episodes_to_threshold": crossing[0] if crossing else None,
                     "env_steps_to_threshold": crossing[1] if crossing else None,
