@@ -277,8 +277,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     out = common.out_dir(args.results, "branched")
     runs = args.results / "runs" / "branched"
-    # Rows of earlier calls (other envs, rules or seeds) stay; this call's replace theirs.
-    rows = {(r["env"], r["rule"]): r for r in _earlier(out / "branched.json")}
+    mine = {}
     for env in args.envs.split(","):
         steps = args.steps or BUDGETS[env]
         for rule in args.rules.split(","):
@@ -288,7 +287,9 @@ def main(argv: list[str] | None = None) -> int:
             for first, seeds, run in run_dirs(runs, env, rule, args.seeds, steps):
                 summary = common.ensure_run(config_of(env, rule, seeds, steps, first), run)
                 parts.append(results_of(env, rule, run, summary, steps))
-            rows[env, rule] = merged(parts)
+            mine[env, rule] = merged(parts)
+    # Read only now, so that rows another call wrote while these trained stay.
+    rows = {(r["env"], r["rule"]): r for r in _earlier(out / "branched.json")} | mine
     envs, rules = list(BUDGETS), list(RULES)
     ordered = [
         rows[key] for key in sorted(rows, key=lambda k: (envs.index(k[0]), rules.index(k[1])))
