@@ -224,8 +224,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"a model-based run on one of {', '.join(TASKS)} is needed", file=sys.stderr)
         return 2
     seeds, ranking = [], []
-    for seed in range(config.seeds):
-        state = jax.tree.map(lambda x, s=seed: x[0, s], states)
+    for index in range(config.seeds):
+        seed = config.first_seed + index
+        state = jax.tree.map(lambda x, i=index: x[0, i], states)
         rows = seed_errors(
             trainer, state, jax.random.key(seed), args.steps, args.starts, args.recent
         )
