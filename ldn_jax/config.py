@@ -339,6 +339,12 @@ class ModelConfig:
     """Adam learning rate of M1."""
     updates: int = 100
     """Minibatch gradient steps on M1 per iteration (the paper: 100 per episode)."""
+    value_loss: float = 0.0
+    """Weight of a value-equivalence term in M1's fit (ours, for studies, in the style of
+    value-aware model learning, Farahmand et al. 2017): the squared difference between the
+    learner's critic at the predicted (mean) next observation and at the real one, over the
+    critic's variance on the batch's real next observations, added to each step's loss. It
+    asks the model to be right where the critic at a branch's cut reads it. 0: off."""
     batch_size: int = 64
     """Minibatch size of each model step, drawn uniformly from the real buffer."""
     buffer_capacity: int = 50_000
@@ -811,6 +817,10 @@ def validate(config: Config) -> Config:
         (config.model.activation in ACTIVATIONS, f"model activation must be one of {ACTIVATIONS}"),
         (config.model.lr > 0, "model lr must be > 0"),
         (config.model.updates >= 0, "model updates must be >= 0"),
+        (
+            config.model.value_loss >= 0,
+            f"model value_loss must be >= 0, got {config.model.value_loss}",
+        ),
         (config.model.batch_size >= 1, "model batch_size must be >= 1"),
         (config.model.buffer_capacity >= 1, "buffer_capacity must be >= 1"),
         (

@@ -8,6 +8,8 @@ fitted by `gaussian_nll`, and the members are ranked on held-out slots of the bu
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import jax
 import jax.numpy as jnp
 import optax
@@ -195,18 +197,41 @@ class Dynamics:
             reward_std=jnp.ones(()),
         )
 
-    def loss(self, params: dict, batch: Transitions, stats: Normalizer | None = None) -> Array:
+    def loss(
+        self,
+        params: dict,
+        batch: Transitions,
+        stats: Normalizer | None = None,
+        value: Callable[[Array], Array] | None = None,
+    ) -> Array:
         """Eq. 2: MSE on the target y = [s', r] (normalised when on), mean over batch and
         output dims. A probabilistic model: `gaussian_nll` of y, plus `BOUND_PENALTY` times
-        the gap between its log-variance bounds."""
+        the gap between its log-variance bounds. With `value` (the critic, `obs [..., D] ->
+        [...]`) and `config.value_loss` > 0, plus that weight times the value-equivalence
+        term (`ModelConfig.value_loss`)."""
         stats = stats if stats is not None else self.init_stats()
         target = self.target(batch, stats)
         if self.probabilistic:
             mean, log_var = self.predict_gaussian(params, stats, batch.obs, batch.action)
             bounds = params["params"]
             gap = bounds["max_log_var"].sum() - bounds["min_log_var"].sum()
-            return gaussian_nll(mean, log_var, target) + BOUND_PENALTY * gap
-        return self.squared_error(params, batch, stats)
+            loss = gaussian_nll(mean, log_var, target) + BOUND_PENALTY * gap
+        else:
+            loss = self.squared_error(params, batch, stats)
+        if value is None or not self.config.value_loss:
+            return loss
+        return loss + self.config.value_loss * self.value_error(params, batch, stats, value)
+
+    def value_error(
+        self, params: dict, batch: Transitions, stats: Normalizer, value: Callable[[Array], Array]
+    ) -> Array:
+        """The critic at the (mean) predicted next observation against the critic at the
+        real one: mean squared difference over the batch, in units of the real values'
+        variance (which, like the real values, takes no gradient)."""
+        predicted, _ = self.predict(params, batch.obs, batch.action, stats)
+        real = jax.lax.stop_gradient(value(batch.next_obs))
+        scale = jax.lax.stop_gradient(jnp.var(real)) + 1e-6
+        return jnp.mean(jnp.square(value(predicted) - real)) / scale
 
     def squared_error(self, params: dict, batch: Transitions, stats: Normalizer) -> Array:
         """Eq. 2's MSE of the (mean) prediction, in normalised units."""
@@ -269,8 +294,15 @@ class Dynamics:
         reward_mean, reward_std = moments(buffer.data.reward)
         return Normalizer(obs_mean, obs_std, reward_mean, reward_std)
 
-    def fit(self, state: ModelState, buffer: Buffer, key: Array) -> tuple[ModelState, Array]:
-        """`config.updates` minibatch Adam steps on M1; returns the mean loss.
+    def fit(
+        self,
+        state: ModelState,
+        buffer: Buffer,
+        key: Array,
+        value: Callable[[Array], Array] | None = None,
+    ) -> tuple[ModelState, Array]:
+        """`config.updates` minibatch Adam steps on M1; returns the mean loss (`value`: the
+        critic of `ModelConfig.value_loss`).
 
         Ensemble: every member takes its own steps (vmapped), member i drawing its minibatches
         with `jax.random.split(key, E)[i]`; the loss returned, and kept as `error_scale`, is
@@ -282,11 +314,11 @@ class Dynamics:
             state = state.replace(bounds=self.buffer_bounds(buffer))
         if not self.ensemble:
             params, opt_state, loss = self._fit_one(
-                state.params, state.opt_state, state.stats, buffer, key
+                state.params, state.opt_state, state.stats, buffer, key, value
             )
             return state.replace(params=params, opt_state=opt_state), loss
         keys = jax.random.split(key, self.config.ensemble)
-        fit = jax.vmap(self._fit_one, (0, 0, None, None, 0))
+        fit = jax.vmap(lambda *a: self._fit_one(*a, value), (0, 0, None, None, 0))
         params, opt_state, losses = fit(state.params, state.opt_state, state.stats, buffer, keys)
         loss = losses.mean()
         if self.probabilistic:
@@ -306,7 +338,13 @@ class Dynamics:
         return state.replace(elites=elites, error_scale=errors[elites].mean())
 
     def _fit_one(
-        self, params: dict, opt_state: optax.OptState, stats: Normalizer, buffer: Buffer, key: Array
+        self,
+        params: dict,
+        opt_state: optax.OptState,
+        stats: Normalizer,
+        buffer: Buffer,
+        key: Array,
+        value: Callable[[Array], Array] | None = None,
     ) -> tuple[dict, optax.OptState, Array]:
         """One model's `config.updates` steps: its new params, Adam state and mean loss."""
 
@@ -316,7 +354,7 @@ class Dynamics:
                 batch = buffer_sample_split(buffer, key, self.config.batch_size, False)
             else:
                 batch = buffer_sample(buffer, key, self.config.batch_size)
-            loss, grads = jax.value_and_grad(self.loss)(params, batch, stats)
+            loss, grads = jax.value_and_grad(self.loss)(params, batch, stats, value)
             updates, opt_state = self.optimizer.update(grads, opt_state, params)
             return (optax.apply_updates(params, updates), opt_state), loss
 

@@ -243,7 +243,10 @@ class Trainer:
             reward=flat(steps.reward),
         )
         buffer = buffer_add(state.buffer, batch, flat(steps.weight) > 0)
-        model, loss = self.dynamics.fit(state.model, buffer, key)
+        value = None
+        if self.config.model.value_loss:
+            value = lambda obs: self.learner.value(state.learner.params, obs)
+        model, loss = self.dynamics.fit(state.model, buffer, key, value)
         return state.replace(model=model, buffer=buffer), loss
 
     def imagine_stage(

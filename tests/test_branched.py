@@ -78,6 +78,32 @@ def test_the_gaussian_nll_matches_a_hand_computed_value():
     assert float(gaussian_nll(mean, log_var, target)) == pytest.approx(expected, rel=1e-6)
 
 
+def test_the_value_equivalence_term_is_the_critics_error_at_the_predicted_next_state():
+    """`model.value_loss`: the fit's loss gains w x mean((V(predicted s') - V(s'))^2) / var
+    V(s'), and with it a gradient that the NLL alone does not have."""
+    dynamics = Dynamics(ModelConfig(**{**BRANCHED, "value_loss": 2.0}), 4, 2)
+    params = jax.tree.map(lambda x: x[0], dynamics.init(jax.random.key(0)).params)
+    k = jax.random.split(jax.random.key(1), 4)
+    batch = Transitions(
+        obs=jax.random.normal(k[0], (32, 4)),
+        action=jax.random.normal(k[1], (32, 2)),
+        next_obs=jax.random.normal(k[2], (32, 4)),
+        reward=jax.random.normal(k[3], (32,)),
+    )
+    stats = dynamics.init_stats()
+    value = lambda obs: 3.0 * obs[..., 0] - obs[..., 2]
+    predicted, _ = dynamics.predict(params, batch.obs, batch.action, stats)
+    real = np.asarray(value(batch.next_obs))
+    expected = np.mean((np.asarray(value(predicted)) - real) ** 2) / (real.var() + 1e-6)
+    with_term = float(dynamics.loss(params, batch, stats, value))
+    without = float(dynamics.loss(params, batch, stats))
+    assert expected > 0.1
+    assert with_term - without == pytest.approx(2.0 * expected, rel=1e-4)
+    grads = [jax.grad(dynamics.loss)(params, batch, stats, v) for v in (value, None)]
+    difference = jax.tree.map(lambda a, b: float(jnp.abs(a - b).max()), *grads)
+    assert max(jax.tree.leaves(difference)) > 1e-4
+
+
 # -- the buffer's split and the elites -------------------------------------------------------
 
 

@@ -196,6 +196,7 @@ def build(*argv):
             "world 'true-reward' steps the real env from imagined observations, and ant's",
         ),
         (["--algo", "ldn", "--set", "model.world=perfect"], "unknown world 'perfect'"),
+        (["--algo", "ldn", "--set", "model.value_loss=-1"], "value_loss must be >= 0, got -1"),
         (
             ["--env", "inverted_pendulum", "--algo", "ldn", "--action-encoding", "force"],
             "action_encoding is for discrete actions",

@@ -12,7 +12,8 @@ policy's log std left to the real updates (`model.imagined_std` "real"), the eli
 as each imagined step (`model.imagined_step` "mean"), the real simulator stepped from the
 imagined states in the model's place (`model.world` "true": what a perfect model would give;
 "true-reward": its reward and termination only; "true-state": its states and termination
-only), or eight times the model's fit steps, which are not rules. Per rule and env: IQM [95%
+only), eight times the model's fit steps, or the model fitted to the critic's values too
+(`model.value_loss`), which are not rules. Per rule and env: IQM [95%
 interval] of the final moving return and of the greedy return after training,
 P(improvement) of the greedy return over PPO and over the best fixed cap, imagined steps per
 real step, and training seconds.
@@ -88,6 +89,11 @@ RULES = {
         {"horizon": 5, "world": "true-reward"},
         "the model's states with the real reward and termination, cut at 5",
     ),
+    "value-5": (
+        "ppo-model",
+        {"horizon": 5, "value_loss": 1.0},
+        "no rule, cut at 5 steps, the model also fitted to the critic's values",
+    ),
     "true-state-5": (
         "ppo-model",
         {"horizon": 5, "world": "true-state"},
@@ -100,7 +106,7 @@ CAPS = ("cap-1", "cap-5", "cap-15")
 
 ONLY = {
     rule: ("hopper", "halfcheetah")
-    for rule in ("std-real", "fit-400", "true-5", "true-reward-5", "true-state-5")
+    for rule in ("std-real", "fit-400", "value-5", "true-5", "true-reward-5", "true-state-5")
 }
 """Rules run on some envs only: inverted_pendulum's PPO has a state-dependent std."""
 
