@@ -5,6 +5,9 @@ probability that a seed of each run beats a seed of the first run.
 
     ldn-jax compare runs/a2c runs/ldn [--json FILE]
 
+Runs of one config on other seeds (a later `--seeds 5 --first-seed 5` beside a run of seeds
+0..4) are pooled into one row, "a + b".
+
 Reads each run's summary.json (the per-seed results), nothing else; numpy in, plain data out.
 """
 
@@ -24,29 +27,58 @@ METRICS = {
 """summary.json's per-seed result -> (its heading, lower is better)."""
 
 
+def _read(run_dir: Path) -> tuple:
+    """`(config, summary)` of a finished run, or ValueError naming what is wrong."""
+    if not run_dir.is_dir():
+        raise ValueError(f"no such run directory: {run_dir}")
+    run = RunDir(run_dir)
+    config = run.read_config()  # RunDirError (a ValueError) names what is wrong
+    try:
+        summary = run.read_summary()
+    except FileNotFoundError:
+        raise ValueError(f"{run_dir} has no summary.json (training not finished?)") from None
+    except ValueError as error:
+        raise RunDirError(f"{run_dir}: unreadable summary.json ({error})") from None
+    return config, summary
+
+
+def _pooled(runs: list[tuple]) -> list[tuple]:
+    """`(names, config, summary)` per run, where runs of one config on other seeds (`--seeds
+    5 --first-seed 5` beside a run of seeds 0..4) are pooled into one entry, in the order
+    their first run was given. Runs whose seeds overlap stay apart."""
+    groups: list[list] = []
+    for name, config, summary in runs:
+        same = {**config.to_dict(), "seeds": None, "first_seed": None}
+        seeds = set(range(config.first_seed, config.first_seed + config.seeds))
+        for group in groups:
+            if group[0] == same and not group[1] & seeds:
+                group[1] |= seeds
+                group[2].append((name, config, summary))
+                break
+        else:
+            groups.append([same, seeds, [(name, config, summary)]])
+    out = []
+    for _, _, members in groups:
+        names = " + ".join(name for name, _, _ in members)
+        runs_of = [r for _, _, summary in members for r in summary["runs"]]
+        out.append((names, members[0][1], {**members[0][2], "runs": runs_of}))
+    return out
+
+
 def rows(run_dirs: list[Path]) -> list[dict]:
     """One row per run and point (K, and a sweep's values): its name (the directory's, or
     its path where two share a name), env, algo, K, the point's name, seeds, how many
     reached the threshold, and per metric the per-seed values and `stats.estimate` of
-    them."""
+    them. Runs of one config on other seeds are one row ("a + b", `_pooled`)."""
     out = []
     names = [d.name for d in run_dirs]
-    for run_dir in run_dirs:
-        if not run_dir.is_dir():
-            raise ValueError(f"no such run directory: {run_dir}")
-        run = RunDir(run_dir)
-        config = run.read_config()  # RunDirError (a ValueError) names what is wrong
-        try:
-            summary = run.read_summary()
-        except FileNotFoundError:
-            raise ValueError(f"{run_dir} has no summary.json (training not finished?)") from None
-        except ValueError as error:
-            raise RunDirError(f"{run_dir}: unreadable summary.json ({error})") from None
+    runs = [(d.name if names.count(d.name) == 1 else str(d), *_read(d)) for d in run_dirs]
+    for name, config, summary in _pooled(runs):
         for index, point in enumerate(config.points):
             k, sweep = point["k"], {n: v for n, v in point.items() if n != "k"}
             seeds = [r for r in summary["runs"] if r["k"] == k and r.get("sweep", {}) == sweep]
             row = {
-                "run": run_dir.name if names.count(run_dir.name) == 1 else str(run_dir),
+                "run": name,
                 "env": config.env,
                 "algo": config.algo,
                 "k": k if config.uses_k else None,
