@@ -546,3 +546,11 @@ def test_the_branched_study_keeps_earlier_rows_and_names_each_envs_seeds(tmp_pat
     text = branched.section(earlier)
     assert "### hopper, 100 steps, 3 seeds" in text
     assert "no rule, cut at 5 steps: beats PPO (P 1.00)" in text
+    assert "LD draw against" not in text  # no LD row, no question asked
+    # The study's question: the LD draw against the field's rules and the best fixed cap.
+    rows = [*earlier, row("hopper", "ld", 3, 30.0), row("hopper", "mbpo", 3, 40.0)]
+    text = branched.section(rows)
+    assert (
+        "The LD draw against the other rules on hopper, P(better): MBPO's horizon schedule, "
+        "1 to 15 0.00 [0.00, 0.00]; no rule, cut at 5 steps 1.00 [1.00, 1.00]"
+    ) in text

@@ -262,7 +262,24 @@ def section(rows: list[dict]) -> str:
         if best_cap:
             verdicts.append(f"best fixed cap: {RULES[best_cap][2]}")
         lines += [f"Verdicts on {env}: " + "; ".join(verdicts) + ".", ""]
+        lines += _ld_against(mine, best_cap, env)
     return "\n".join(lines)
+
+
+LD_RIVALS = ("mbpo", "m2ac", "macura")
+"""The field's rules the learning degree's draw is set against (the study's question)."""
+
+
+def _ld_against(mine: dict, best_cap: str | None, env: str) -> list[str]:
+    """The study's question on one env: does the LD draw choose branch lengths as well as
+    MBPO's schedule, M2AC and MACURA, and as the best fixed cap? P(the LD draw better)."""
+    if "ld" not in mine:
+        return []
+    rivals = [r for r in (*LD_RIVALS, best_cap) if r is not None and r in mine]
+    if not rivals:
+        return []
+    parts = [f"{RULES[r][2]} {_versus(mine['ld'], mine, r)}" for r in rivals]
+    return [f"The LD draw against the other rules on {env}, P(better): " + "; ".join(parts), ""]
 
 
 def _earlier(path: Path) -> list[dict]:
