@@ -272,7 +272,13 @@ def main(argv: list[str] | None = None) -> int:
             f"{ranks['model_true_correlation']:.2f}, error {ranks['error']:.3f}",
             flush=True,
         )
-    record = {"env": config.env, "algo": config.algo, **vars(args), "seeds": seeds}
+    record = {
+        "env": config.env,
+        "algo": config.algo,
+        **vars(args),
+        "first_seed": config.first_seed,
+        "seeds": seeds,
+    }
     record["action_ranking"] = ranking
     record["run"] = str(args.run)
     (args.run / "model_error.json").write_text(json.dumps(record, indent=1) + "\n")

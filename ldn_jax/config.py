@@ -371,8 +371,10 @@ class Config:
     seeds: int = 5
     """Number of seeds, vmapped: seeds `first_seed` .. `first_seed + seeds - 1`."""
     first_seed: int = 0
-    """The batch's first seed; seed s uses PRNG key s, so a run of seeds 5..9 (`--seeds 5
-    --first-seed 5`) trains what seeds 5..9 of a 10-seed run train and adds to one of 0..4."""
+    """The batch's first seed; seed s starts from PRNG key s, so a run of seeds 5..9 (`--seeds
+    5 --first-seed 5`) trains what seeds 5..9 of a 10-seed run train (to float rounding: the
+    batch sizes differ) and adds to one of 0..4. Its greedy evaluation draws the episode
+    starts every run of 5 seeds draws."""
     k: tuple[float, ...] = (0.5, 1.0, 2.0)
     """Learning-degree gains K (eq. 6), vmapped; K=1 is eq. 4. An algorithm that does not
     stop by the learning degree keeps only the first (`from_preset`): K does nothing there."""
@@ -652,7 +654,8 @@ def sweepable() -> tuple[str, ...]:
     reads as a number. Not: K (`k` is its own axis), `threshold` (read by the host, after
     training), the initialisers' `init_std` and `log_std_init` (read where the parameters
     are made; `init_std` shapes the network modules), the branched imagination's
-    `imagined_ratio` and `real_share` (they size its batches), and every int, bool or str field
+    `imagined_ratio` and `real_share` (they size its batches), the model's `value_loss` (it
+    decides whether the fit reads the critic), and every int, bool or str field
     (sizes, counts, choices: they change the program's shapes or code, so they need separate
     runs)."""
     excluded = {
@@ -662,6 +665,7 @@ def sweepable() -> tuple[str, ...]:
         "agent.log_std_init",
         "model.imagined_ratio",
         "model.real_share",
+        "model.value_loss",
     }
     return tuple(
         name

@@ -346,7 +346,14 @@ class Dynamics:
         key: Array,
         value: Callable[[Array], Array] | None = None,
     ) -> tuple[dict, optax.OptState, Array]:
-        """One model's `config.updates` steps: its new params, Adam state and mean loss."""
+        """One model's `config.updates` steps: its new params, Adam state and mean loss (eq.
+        2's or the NLL, without the value-equivalence term, which only its gradient takes)."""
+
+        def objective(params: dict, batch: Transitions) -> tuple[Array, Array]:
+            fit = self.loss(params, batch, stats)
+            if value is None or not self.config.value_loss:
+                return fit, fit
+            return fit + self.config.value_loss * self.value_error(params, batch, stats, value), fit
 
         def update(carry, key: Array):
             params, opt_state = carry
@@ -354,7 +361,7 @@ class Dynamics:
                 batch = buffer_sample_split(buffer, key, self.config.batch_size, False)
             else:
                 batch = buffer_sample(buffer, key, self.config.batch_size)
-            loss, grads = jax.value_and_grad(self.loss)(params, batch, stats, value)
+            (_, loss), grads = jax.value_and_grad(objective, has_aux=True)(params, batch)
             updates, opt_state = self.optimizer.update(grads, opt_state, params)
             return (optax.apply_updates(params, updates), opt_state), loss
 

@@ -61,7 +61,8 @@ def model_world(
     env stepped from the imagined observations (`ModelConfig.world` "true"): it gives each
     step in place of the model's prediction, which the learning degree and `stop` still read.
     Its termination always replaces the model's; `true_state` False keeps the model's next
-    observation ("true-reward"), `true_reward` False the model's reward ("true-state").
+    observation ("true-reward"), `true_reward` False the model's reward ("true-state"; with
+    `env_reward`, the exact reward of the model's predicted transition).
 
     `env_reward(obs, action, next_obs)`, if not None, replaces the model's reward (the LD
     still reads the models' whole output). `model_action` encodes the env action as the

@@ -252,30 +252,32 @@ def test_compare_prints_iqm_and_the_probability_of_improvement(ldn_run, a2c_run,
 
 
 def test_compare_pools_runs_of_one_config_on_other_seeds(tmp_path):
-    """A run of seeds 3-4 (`--first-seed 3`) beside one of seeds 0-2 is one row of 5 seeds;
-    a run repeating seeds 0-2, or of another config, stays apart."""
+    """A run of seeds 3-4 (`--first-seed 3`) beside one of seeds 0-2 is one row of 5 seeds
+    per K; a run repeating seeds 0-2, or of another config, stays apart."""
     from ldn_jax.config import from_preset
     from ldn_jax.host.compare import rows
     from ldn_jax.host.run_dir import RunDir
 
     def run(name, first, seeds, algo="ldn"):
         config = from_preset(
-            "paper", env="cartpole-v1", algo=algo, k=(1.0,), seeds=seeds, first_seed=first
+            "paper", env="cartpole-v1", algo=algo, k=(1.0, 2.0), seeds=seeds, first_seed=first
         )
         (tmp_path / name).mkdir()
         RunDir(tmp_path / name).write_config(config)
         results = [
-            {"seed": first + i, "k": 1.0, "episodes_to_threshold": None,
-             "env_steps_to_threshold": None, "final_moving_return": 10.0 * (first + i),
+            {"seed": first + i, "k": k, "episodes_to_threshold": None,
+             "env_steps_to_threshold": None, "final_moving_return": 10.0 * (first + i) + k,
              "eval_return": 1.0}
-            for i in range(seeds)
+            for k in config.k for i in range(seeds)
         ]  # fmt: skip
         (tmp_path / name / "summary.json").write_text(json.dumps({"runs": results}))
         return tmp_path / name
 
     table = rows([run("a", 0, 3), run("b", 3, 2), run("c", 0, 3), run("d", 3, 2, "a2c")])
-    assert [(row["run"], row["seeds"]) for row in table] == [("a + b", 5), ("c", 3), ("d", 2)]
-    assert table[0]["final_moving_return"]["values"] == [0.0, 10.0, 20.0, 30.0, 40.0]
+    assert [(row["run"], row["k"], row["seeds"]) for row in table] == [
+        ("a + b", 1.0, 5), ("a + b", 2.0, 5), ("c", 1.0, 3), ("c", 2.0, 3), ("d", None, 2)
+    ]  # fmt: skip
+    assert table[1]["final_moving_return"]["values"] == [2.0, 12.0, 22.0, 32.0, 42.0]
 
 
 @pytest.mark.parametrize(

@@ -147,7 +147,8 @@ def run_dirs(runs: Path, env: str, rule: str, seeds: int, steps: int) -> list[tu
 
 
 def merged(parts: list[dict]) -> dict:
-    """One row from rows of the same rule on consecutive seeds."""
+    """One row from rows of the same rule on consecutive seeds (its training seconds: the
+    parts' sum, each part one program)."""
     row = dict(parts[0])
     for name in ("final_moving_return", "eval_return", "steps_to_solve"):
         if row[name] is not None:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ldn_jax import envs
 from ldn_jax.host import stats
 from ldn_jax.host.run_dir import RunDir, RunDirError
 
@@ -45,10 +46,14 @@ def _read(run_dir: Path) -> tuple:
 def _pooled(runs: list[tuple]) -> list[tuple]:
     """`(names, config, summary)` per run, where runs of one config on other seeds (`--seeds
     5 --first-seed 5` beside a run of seeds 0..4) are pooled into one entry, in the order
-    their first run was given. Runs whose seeds overlap stay apart."""
+    their first run was given: configs equal but for their seeds and the preset's name they
+    started from (a MuJoCo backend "auto" read as what it resolves to here). Runs whose seeds
+    overlap stay apart."""
     groups: list[list] = []
     for name, config, summary in runs:
-        same = {**config.to_dict(), "seeds": None, "first_seed": None}
+        same = {**config.to_dict(), "seeds": None, "first_seed": None, "preset": None}
+        if same.get("backend") == "auto" and config.env in envs.mujoco.TASKS:
+            same["backend"] = envs.mujoco.resolve_backend("auto")  # as the CLI records it
         seeds = set(range(config.first_seed, config.first_seed + config.seeds))
         for group in groups:
             if group[0] == same and not group[1] & seeds:
@@ -73,12 +78,12 @@ def rows(run_dirs: list[Path]) -> list[dict]:
     out = []
     names = [d.name for d in run_dirs]
     runs = [(d.name if names.count(d.name) == 1 else str(d), *_read(d)) for d in run_dirs]
-    for name, config, summary in _pooled(runs):
+    for run_name, config, summary in _pooled(runs):
         for index, point in enumerate(config.points):
             k, sweep = point["k"], {n: v for n, v in point.items() if n != "k"}
             seeds = [r for r in summary["runs"] if r["k"] == k and r.get("sweep", {}) == sweep]
             row = {
-                "run": name,
+                "run": run_name,
                 "env": config.env,
                 "algo": config.algo,
                 "k": k if config.uses_k else None,
