@@ -518,6 +518,9 @@ def test_the_branched_study_adds_seeds_to_a_finished_run_and_merges_their_rows(
     assert dirs(5) == [(0, 5, "hopper-ld-s5-100")]  # its own run, however many others there are
     assert dirs(8) == [(0, 8, "hopper-ld-s8-100")]  # started: resumed, not split
     assert dirs(4) == [(0, 3, "hopper-ld-s3-100"), (3, 1, "hopper-ld-s3+1-100")]
+    assert dirs(15) == [  # the 5 and 5 more, then seeds 10-14
+        (0, 5, "hopper-ld-s5-100"), (5, 5, "hopper-ld-s5+5-100"), (10, 5, "hopper-ld-s10+5-100")
+    ]  # fmt: skip
     assert dirs(2) == [(0, 2, "hopper-ld-s2-100")]
     rows = [
         {"seeds": 5, "final_moving_return": [1.0] * 5, "eval_return": [2.0] * 5,

@@ -131,17 +131,31 @@ def config_of(env: str, rule: str, seeds: int, steps: int, first_seed: int = 0):
 def run_dirs(runs: Path, env: str, rule: str, seeds: int, steps: int) -> list[tuple]:
     """`(first seed, seeds, directory)` of the runs that make up `seeds` seeds of a rule: a
     run of them all if one was started; else the finished run of the most seeds below
-    `seeds` in `runs`, if any, then one of the seeds after it (`first_seed`), so 10 seeds
-    reuse an earlier run of 5."""
+    `seeds` in `runs`, if any, and the finished runs of the seeds after it (`s5+5`, then
+    `s10+5`, ...) as far as they go below `seeds`, then one of the seeds left
+    (`first_seed`): 10 seeds reuse an earlier run of 5, 15 seeds those of 5 and 5 more."""
     whole = runs / f"{env}-{rule}-s{seeds}-{steps}"
     if RunDir(whole).holds_run():
         return [(0, seeds, whole)]
-    done = 0
-    for path in runs.glob(f"{env}-{rule}-s*-{steps}"):
-        count = path.name.removeprefix(f"{env}-{rule}-s").removesuffix(f"-{steps}")
-        if count.isdigit() and done < int(count) < seeds and RunDir(path).is_finished():
-            done = int(count)
-    parts = [(0, done, runs / f"{env}-{rule}-s{done}-{steps}")] if done else []
+
+    def finished(pattern: str) -> list[tuple[int, Path]]:
+        """(seeds, directory) of the finished runs `{env}-{rule}-s{pattern}{N}-{steps}`."""
+        found = []
+        for path in runs.glob(f"{env}-{rule}-s{pattern}*-{steps}"):
+            count = path.name.removeprefix(f"{env}-{rule}-s{pattern}").removesuffix(f"-{steps}")
+            if count.isdigit() and RunDir(path).is_finished():
+                found.append((int(count), path))
+        return found
+
+    parts, done = [], 0
+    first = [(n, path) for n, path in finished("") if n < seeds]
+    if first:
+        done, path = max(first)
+        parts.append((0, done, path))
+        while more := [(n, path) for n, path in finished(f"{done}+") if done + n < seeds]:
+            n, path = max(more)
+            parts.append((done, n, path))
+            done += n
     rest = f"s{seeds}" if not done else f"s{done}+{seeds - done}"
     return [*parts, (done, seeds - done, runs / f"{env}-{rule}-{rest}-{steps}")]
 
