@@ -209,6 +209,16 @@ class Dynamics:
         the gap between its log-variance bounds. With `value` (the critic, `obs [..., D] ->
         [...]`) and `config.value_loss` > 0, plus that weight times the value-equivalence
         term (`ModelConfig.value_loss`)."""
+        return self.losses(params, batch, stats, value)[0]
+
+    def losses(
+        self,
+        params: dict,
+        batch: Transitions,
+        stats: Normalizer | None = None,
+        value: Callable[[Array], Array] | None = None,
+    ) -> tuple[Array, Array]:
+        """`(loss, fit)`: `loss` as above, and `fit` the same without the value term."""
         stats = stats if stats is not None else self.init_stats()
         target = self.target(batch, stats)
         if self.probabilistic:
@@ -219,8 +229,8 @@ class Dynamics:
         else:
             loss = self.squared_error(params, batch, stats)
         if value is None or not self.config.value_loss:
-            return loss
-        return loss + self.config.value_loss * self.value_error(params, batch, stats, value)
+            return loss, loss
+        return loss + self.config.value_loss * self.value_error(params, batch, stats, value), loss
 
     def value_error(
         self, params: dict, batch: Transitions, stats: Normalizer, value: Callable[[Array], Array]
@@ -349,19 +359,14 @@ class Dynamics:
         """One model's `config.updates` steps: its new params, Adam state and mean loss (eq.
         2's or the NLL, without the value-equivalence term, which only its gradient takes)."""
 
-        def objective(params: dict, batch: Transitions) -> tuple[Array, Array]:
-            fit = self.loss(params, batch, stats)
-            if value is None or not self.config.value_loss:
-                return fit, fit
-            return fit + self.config.value_loss * self.value_error(params, batch, stats, value), fit
-
         def update(carry, key: Array):
             params, opt_state = carry
             if self.probabilistic:  # the held-out slots rank the members
                 batch = buffer_sample_split(buffer, key, self.config.batch_size, False)
             else:
                 batch = buffer_sample(buffer, key, self.config.batch_size)
-            (_, loss), grads = jax.value_and_grad(objective, has_aux=True)(params, batch)
+            objective = lambda p: self.losses(p, batch, stats, value)
+            (_, loss), grads = jax.value_and_grad(objective, has_aux=True)(params)
             updates, opt_state = self.optimizer.update(grads, opt_state, params)
             return (optax.apply_updates(params, updates), opt_state), loss
 
