@@ -345,6 +345,13 @@ class ModelConfig:
     learner's critic at the predicted (mean) next observation and at the real one, over the
     critic's variance on the batch's real next observations, added to each step's loss. It
     asks the model to be right where the critic at a branch's cut reads it. 0: off."""
+    penalty: float = 0.0
+    """Pessimism (MOPO's reward penalty, Yu et al. 2020, read on our estimator): each imagined
+    reward minus `penalty` times the step's uncertainty, the learning-degree estimator's
+    statistic before `ld_scale` and the window (an ensemble: its disagreement relative to its
+    fit error, about 1 where the members disagree as much as they err). It lowers the value
+    of states the model is unsure of, where a policy would otherwise exploit its errors.
+    0: off."""
     batch_size: int = 64
     """Minibatch size of each model step, drawn uniformly from the real buffer."""
     buffer_capacity: int = 50_000
@@ -825,6 +832,7 @@ def validate(config: Config) -> Config:
             config.model.value_loss >= 0,
             f"model value_loss must be >= 0, got {config.model.value_loss}",
         ),
+        (config.model.penalty >= 0, f"model penalty must be >= 0, got {config.model.penalty}"),
         (config.model.batch_size >= 1, "model batch_size must be >= 1"),
         (config.model.buffer_capacity >= 1, "buffer_capacity must be >= 1"),
         (

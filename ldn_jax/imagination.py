@@ -53,6 +53,7 @@ def model_world(
     true_step: Any = None,
     true_state: bool = True,
     true_reward: bool = True,
+    penalty: Array | float = 0.0,
 ) -> WorldStep:
     """A world that steps M1 (an ensemble: its members' mean prediction). Its extras carry
     each step's learning degree `ld`.
@@ -63,6 +64,9 @@ def model_world(
     Its termination always replaces the model's; `true_state` False keeps the model's next
     observation ("true-reward"), `true_reward` False the model's reward ("true-state"; with
     `env_reward`, the exact reward of the model's predicted transition).
+
+    `penalty` (`ModelConfig.penalty`) is subtracted from each step's reward times the
+    estimator's statistic before scale and window (MOPO's pessimism).
 
     `env_reward(obs, action, next_obs)`, if not None, replaces the model's reward (the LD
     still reads the models' whole output). `model_action` encodes the env action as the
@@ -83,8 +87,8 @@ def model_world(
     def step(key: Array, world: Array | None, obs: Array, action: Array, alive: Array):
         encoded = model_action(action)
         k_model = jax.random.fold_in(key, MODEL_STREAM)  # the stop rule draws from `key`
-        predicted, statistic = estimate(dynamics, model, obs, encoded, k_model)
-        statistic, world = windowed(scale * statistic, world)
+        predicted, uncertainty = estimate(dynamics, model, obs, encoded, k_model)
+        statistic, world = windowed(scale * uncertainty, world)
         ld, p_stop = degree(statistic, gain)
         next_obs, reward = dynamics.denormalize(model.stats, *predicted)
         if env_reward is not None:
@@ -100,6 +104,7 @@ def model_world(
                 reward = true_rewards
             if true_state:
                 next_obs, outside = true_obs, jnp.zeros_like(outside)
+        reward = reward - penalty * uncertainty
         extras = {"ld": ld}
         if model.bounds is not None:
             extras["outside"] = outside & ~terminated

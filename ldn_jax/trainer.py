@@ -395,6 +395,7 @@ class Trainer:
             None if self.config.model.world == "model" else self._true_step,
             true_state=self.config.model.world in ("true", "true-state"),
             true_reward=self.config.model.world in ("true", "true-reward"),
+            penalty=self.config.model.penalty,
         )
 
     def _true_step(self, key: Array, obs: Array, action: Array) -> tuple[Array, Array, Array]:

@@ -252,3 +252,34 @@ def test_each_rule_trains_and_counts_its_imagined_steps(rule):
     if rule == "m2ac":
         assert (per_iteration <= 8 + 4 + 2 + 1).all()
     assert int(states.imagined_steps[0, 0]) == int(imagined[-1])
+
+
+def test_a_penalty_takes_its_weight_times_the_ensembles_disagreement_from_each_reward():
+    """`model.penalty` (MOPO's pessimism): the imagined reward less the weight times the
+    step's relative disagreement of the members, computed here from their predictions."""
+    obs = jnp.array([[0.0, 0.0, 0.0, 0.0], [0.01, 0.1, -0.02, 0.3], [0.0, 0.0, 0.2, 1.0]])
+    action = jnp.array([0, 1, 1])
+    key, alive = jax.random.key(1), jnp.ones(3, bool)
+    steps = {}
+    for penalty in (0.0, 2.5):
+        model = {"ld": "ensemble", "ensemble": 3, "penalty": penalty}
+        config = from_preset("paper", env="cartpole-v1", algo="ldn", seeds=1, model=model)
+        trainer = Trainer(validate(config))
+        state = jax.tree.map(lambda x: x[0, 0], trainer.init_batch())
+        state = state.replace(model=state.model.replace(error_scale=jnp.float32(0.01)))
+        world = trainer._model_world(state, jnp.float32(1.0))
+        steps[penalty] = world(key, None, obs, action, alive)
+    dynamics, model = trainer.dynamics, state.model
+    members = jnp.concatenate(
+        [m[..., None] if m.ndim == 2 else m for m in
+         dynamics.predict_members(model.params, model.stats, obs, ENCODE(action))], axis=-1
+    )  # fmt: skip
+    centred = members - members.mean(axis=0)
+    d_rel = 0.5 * np.mean(np.square(np.asarray(centred)), axis=(0, 2)) / 0.01
+    assert d_rel.min() > 0
+    np.testing.assert_allclose(
+        np.asarray(steps[0.0][2]) - np.asarray(steps[2.5][2]), 2.5 * d_rel, rtol=1e-4
+    )
+    np.testing.assert_array_equal(np.asarray(steps[0.0][0]), np.asarray(steps[2.5][0]))
+    with pytest.raises(ValueError, match="penalty must be >= 0"):
+        validate(from_preset("paper", env="cartpole-v1", algo="ldn", model={"penalty": -1.0}))
