@@ -42,6 +42,9 @@ IMAGINED_STD = ("learn", "real")
 """What branched imagination's updates do to a state-independent log std
 (`ModelConfig.imagined_std`)."""
 
+IMAGINED_UPDATES = ("all", "critic")
+"""What branched imagination's updates train (`ModelConfig.imagined_updates`)."""
+
 SCHEDULES = ("episodes", "steps")
 """What one iteration of real play is (`Config.schedule`)."""
 
@@ -294,6 +297,12 @@ class ModelConfig:
     Two things still see the imagined updates: the step count of the actor's Adam, which
     the log std shares (its bias correction fades a little sooner), and the actor's
     gradient-norm clip, which includes the log std's gradient."""
+    imagined_updates: str = "all"
+    """`imagine_start` "real", one of `IMAGINED_UPDATES`. "all": the updates on imagined rows
+    train the whole learner. "critic" (ours, for studies; in the spirit of model-based value
+    expansion, Feinberg et al. 2018): they train the critic only, leaving the actor, its log
+    std and their optimiser moments as the real updates set them, so the model's errors reach
+    the policy only through the critic's values, not through advantages on imagined rows."""
     probabilistic: bool = False
     """Each member of the ensemble (`ld` "ensemble" or "variance") outputs a Gaussian over
     the standardised next observation and reward, fitted by negative log-likelihood with
@@ -876,6 +885,15 @@ def validate(config: Config) -> Config:
             or (model.imagine_start == "real" and config.agent.log_std_init is not None),
             "imagined_std 'real' needs branched imagination (imagine_start 'real') and a "
             "policy with a state-independent log std (agent.log_std_init)",
+        ),
+        (
+            model.imagined_updates in IMAGINED_UPDATES,
+            f"unknown imagined_updates {model.imagined_updates!r}; valid: "
+            f"{', '.join(IMAGINED_UPDATES)}",
+        ),
+        (
+            model.imagined_updates == "all" or model.imagine_start == "real",
+            "imagined_updates 'critic' needs branched imagination (imagine_start 'real')",
         ),
         (model.imagined_ratio > 0, f"imagined_ratio must be > 0, got {model.imagined_ratio}"),
         (0 <= model.real_share < 1, f"real_share must be in [0, 1), got {model.real_share}"),

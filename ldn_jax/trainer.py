@@ -326,7 +326,7 @@ class Trainer:
             world,
             self.max_steps,
             horizon=horizon,
-            keep=("log_std",) if config.imagined_std == "real" else (),
+            keep=self._kept_by_imagination,
             mix=self._real_rows(real.steps, real.lengths),
         )
         rows = jnp.ceil(config.imagined_ratio * played)
@@ -341,6 +341,15 @@ class Trainer:
             rows=rows,
         )
         return state.replace(learner=learner), episodes
+
+    @property
+    def _kept_by_imagination(self) -> tuple[str, ...]:
+        """The learner's parameters that branched updates leave as they were
+        (`ModelConfig.imagined_std`, `ModelConfig.imagined_updates`)."""
+        config = self.config.model
+        if config.imagined_updates == "critic":
+            return ("actor", "log_std")
+        return ("log_std",) if config.imagined_std == "real" else ()
 
     @property
     def branch_segments(self) -> int:

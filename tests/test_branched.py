@@ -197,6 +197,43 @@ def test_a_branch_starts_from_a_state_in_the_real_buffer():
         assert (time <= 4).all()
 
 
+def test_critic_only_imagination_moves_the_critic_and_leaves_the_actor():
+    """`model.imagined_updates` "critic": the branched stage's updates train the critic, and
+    the actor's parameters and optimiser moments stay as they were; "all" moves both."""
+    moved = {}
+    for updates in ("all", "critic"):
+        trainer = Trainer(_config(model={"imagined_updates": updates}))
+        state = jax.tree.map(lambda x: x[0, 0], trainer.init_batch())
+        buffer = _buffer(
+            23, obs_size=4, action_size=2, capacity=trainer.config.model.buffer_capacity
+        )
+        state = state.replace(
+            buffer=buffer.replace(data=buffer.data.replace(obs=buffer.data.obs * 0.01))
+        )
+        _, real = jax.jit(trainer.real_stage)(state, jax.random.key(3))
+        after, _ = jax.jit(trainer.branch_stage)(state, jax.random.key(4), jnp.float32(1.0), real)
+        differ = lambda a, b: any(
+            not np.array_equal(x, y)
+            for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True)
+        )
+        old, new = state.learner, after.learner
+        moved[updates] = (
+            differ(old.params["actor"], new.params["actor"]),
+            differ(old.params["critic"], new.params["critic"]),
+            differ(old.opt_state, new.opt_state),
+        )
+        if updates == "critic":
+            keep = lambda tree: [
+                np.asarray(x)
+                for p, x in jax.tree_util.tree_leaves_with_path(tree)
+                if "actor" in [getattr(k, "key", None) for k in p]
+            ]
+            for a, b in zip(keep(old.opt_state), keep(new.opt_state), strict=True):
+                np.testing.assert_array_equal(a, b)
+    assert moved["all"] == (True, True, True)
+    assert moved["critic"] == (False, True, True)
+
+
 @pytest.fixture(scope="module")
 def branched_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("branched")
@@ -266,6 +303,11 @@ def _build(*argv):
         (["--algo", "ldn", "--set", "model.imagined_step=mode"], "unknown imagined_step 'mode'"),
         (["--algo", "ldn", "--set", "model.imagined_step=mean"], "it needs model.probabilistic"),
         (["--algo", "ppo-model", "--set", "model.imagined_std=real"], "needs branched imagination"),
+        (["--algo", "ldn", "--set", "model.imagined_updates=actor"], "unknown imagined_updates"),
+        (
+            ["--algo", "ppo-model", "--set", "model.imagined_updates=critic"],
+            "imagined_updates 'critic' needs branched imagination",
+        ),
         (
             ["--algo", "ppo-model", "--preset", "branched", "--env", "cartpole-v1",
              "--set", "model.imagined_std=real"],

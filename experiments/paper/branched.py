@@ -13,7 +13,8 @@ as each imagined step (`model.imagined_step` "mean"), the real simulator stepped
 imagined states in the model's place (`model.world` "true": what a perfect model would give;
 "true-reward": its reward and termination only; "true-state": its states and termination
 only), eight times the model's fit steps, or the model fitted to the critic's values too
-(`model.value_loss`), which are not rules. Per rule and env: IQM [95%
+(`model.value_loss`), or imagined rows that train the critic only
+(`model.imagined_updates`), which are not rules. Per rule and env: IQM [95%
 interval] of the final moving return and of the greedy return after training,
 P(improvement) of the greedy return over PPO and over the best fixed cap, imagined steps per
 real step, and training seconds.
@@ -99,6 +100,11 @@ RULES = {
         {"horizon": 5, "world": "true-state"},
         "the real states and termination with the model's reward, cut at 5",
     ),
+    "critic-5": (
+        "ppo-model",
+        {"horizon": 5, "imagined_updates": "critic"},
+        "no rule, cut at 5 steps, imagined rows train the critic only",
+    ),
 }
 """Rule -> (algorithm, model fields over the preset's, how the report names it)."""
 
@@ -106,7 +112,15 @@ CAPS = ("cap-1", "cap-5", "cap-15")
 
 ONLY = {
     rule: ("hopper", "halfcheetah")
-    for rule in ("std-real", "fit-400", "value-5", "true-5", "true-reward-5", "true-state-5")
+    for rule in (
+        "std-real",
+        "fit-400",
+        "value-5",
+        "true-5",
+        "true-reward-5",
+        "true-state-5",
+        "critic-5",
+    )
 }
 """Rules run on some envs only: inverted_pendulum's PPO has a state-dependent std."""
 
