@@ -298,11 +298,13 @@ class ModelConfig:
     the log std shares (its bias correction fades a little sooner), and the actor's
     gradient-norm clip, which includes the log std's gradient."""
     imagined_updates: str = "all"
-    """`imagine_start` "real", one of `IMAGINED_UPDATES`. "all": the updates on imagined rows
-    train the whole learner. "critic" (ours, for studies; in the spirit of model-based value
-    expansion, Feinberg et al. 2018): they train the critic only, leaving the actor, its log
-    std and their optimiser moments as the real updates set them, so the model's errors reach
-    the policy only through the critic's values, not through advantages on imagined rows."""
+    """`imagine_start` "real", one of `IMAGINED_UPDATES`: what the branched updates train.
+    "all": the whole learner. "critic" (ours, for studies; in the spirit of model-based value
+    expansion, Feinberg et al. 2018): the critic only; the actor's and log std's gradients
+    and steps are zero there (so a global-norm clip and PPO's KL guard see the critic alone),
+    and their optimiser moments stay as the real updates left them. The model's errors then
+    reach the policy only through the critic's values, not through advantages on imagined
+    rows. The `real_share` rows mixed into those updates train the critic only too."""
     probabilistic: bool = False
     """Each member of the ensemble (`ld` "ensemble" or "variance") outputs a Gaussian over
     the standardised next observation and reward, fitted by negative log-likelihood with
@@ -356,9 +358,12 @@ class ModelConfig:
     asks the model to be right where the critic at a branch's cut reads it. 0: off."""
     penalty: float = 0.0
     """Pessimism (MOPO's reward penalty, Yu et al. 2020, read on our estimator): each imagined
-    reward minus `penalty` times the step's uncertainty, the learning-degree estimator's
-    statistic before `ld_scale` and the window (an ensemble: its disagreement relative to its
-    fit error, about 1 where the members disagree as much as they err). It lowers the value
+    reward minus `penalty` times the step's uncertainty, the ensemble estimator's statistic
+    (`ld` "ensemble": the members' disagreement relative to their fit error, about 1 where
+    they disagree as much as they err; "variance": the drawn member's predicted variance)
+    before `ld_scale` and the window. Needs `ld` "ensemble" or "variance" and `world`
+    "model"; the logged imagined returns include it, and `agent.terminal_reward` replaces it
+    on terminal steps. It lowers the value
     of states the model is unsure of, where a policy would otherwise exploit its errors.
     0: off."""
     batch_size: int = 64
@@ -885,6 +890,17 @@ def validate(config: Config) -> Config:
             or (model.imagine_start == "real" and config.agent.log_std_init is not None),
             "imagined_std 'real' needs branched imagination (imagine_start 'real') and a "
             "policy with a state-independent log std (agent.log_std_init)",
+        ),
+        (
+            model.penalty == 0 or model.ld in ("ensemble", "variance"),
+            "model penalty reads an ensemble's uncertainty (M1's deviation from M0 grows with "
+            "what it has learned, not with what it does not know): set ld 'ensemble' or "
+            "'variance'",
+        ),
+        (
+            model.penalty == 0 or model.world == "model",
+            f"model penalty is pessimism about the model's steps, and world {model.world!r} "
+            "takes the real env's; use world 'model'",
         ),
         (
             model.imagined_updates in IMAGINED_UPDATES,

@@ -104,7 +104,8 @@ def model_world(
                 reward = true_rewards
             if true_state:
                 next_obs, outside = true_obs, jnp.zeros_like(outside)
-        reward = reward - penalty * uncertainty
+        if not (isinstance(penalty, float) and penalty == 0.0):  # a sweep's value is traced
+            reward = reward - penalty * uncertainty
         extras = {"ld": ld}
         if model.bounds is not None:
             extras["outside"] = outside & ~terminated

@@ -321,8 +321,9 @@ class Trainer:
         horizon = config.horizon
         if rule == "mbpo":
             horizon = scheduled_horizon(config, state.env_steps + played)
+        frozen = ("actor", "log_std") if config.imagined_updates == "critic" else ()
         player = Player(
-            self.learner,
+            self.learner.freezing(frozen),
             world,
             self.max_steps,
             horizon=horizon,

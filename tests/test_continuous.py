@@ -388,3 +388,33 @@ def test_kept_leaves_leave_the_log_std_and_its_adam_moments_as_they_were():
     for a, b in zip(actor(moved), actor(kept), strict=True):
         np.testing.assert_array_equal(a, b)
     assert any(not np.array_equal(a, b) for a, b in zip(actor(state), actor(kept), strict=True))
+
+
+def test_a_frozen_actor_takes_no_step_and_leaves_the_clip_and_kl_to_the_critic():
+    """`freezing` (branched `model.imagined_updates` "critic"): PPO's update moves the critic
+    only, the actor and log std stay exact, so its approximate KL is 0 and the KL guard never
+    stops it."""
+    agent = from_preset(
+        "paper", algo="ppo",
+        agent={"log_std_init": 0.0, "actor_lr": 1e-2, "critic_lr": 1e-2, "target_kl": 1e-4,
+               "max_grad_norm": 0.05, "normalize_obs": True},
+    ).agent  # fmt: skip
+    learner = PPO(agent, obs_size=2, action_spec=Box((-1.0,), (1.0,)))
+    start, _ = jax.jit(learner.update)(
+        learner.init(jax.random.key(0)), _bandit_segment(jax.random.key(1)), jax.random.key(4)
+    )
+    frozen = learner.freezing(("actor", "log_std"))
+    state, info = jax.jit(frozen.update)(
+        start, _bandit_segment(jax.random.key(2)), jax.random.key(3)
+    )
+    for name in ("actor", "log_std", "obs_norm"):
+        old, new = jax.tree.leaves(start.params[name]), jax.tree.leaves(state.params[name])
+        for a, b in zip(old, new, strict=True):
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    assert float(info["approx_kl"]) == 0.0 and float(info["kl_stopped"]) == 0.0
+    critic = [jax.tree.leaves(s.params["critic"]) for s in (start, state)]
+    moved = [not np.array_equal(a, b) for a, b in zip(*critic, strict=True)]
+    assert any(moved)
+    # Unfrozen, the same update is stopped by the KL guard at once and moves the actor.
+    _, info = jax.jit(learner.update)(start, _bandit_segment(jax.random.key(2)), jax.random.key(3))
+    assert float(info["kl_stopped"]) > 0

@@ -263,12 +263,14 @@ def test_a_penalty_takes_its_weight_times_the_ensembles_disagreement_from_each_r
     steps = {}
     for penalty in (0.0, 2.5):
         model = {"ld": "ensemble", "ensemble": 3, "penalty": penalty}
+        model.update(ld_scale=10.0, ld_window=3)  # the penalty reads the step before them
         config = from_preset("paper", env="cartpole-v1", algo="ldn", seeds=1, model=model)
         trainer = Trainer(validate(config))
         state = jax.tree.map(lambda x: x[0, 0], trainer.init_batch())
         state = state.replace(model=state.model.replace(error_scale=jnp.float32(0.01)))
         world = trainer._model_world(state, jnp.float32(1.0))
-        steps[penalty] = world(key, None, obs, action, alive)
+        history = jnp.full((3, 2), 5.0)  # earlier steps' deviations in the window
+        steps[penalty] = world(key, history, obs, action, alive)
     dynamics, model = trainer.dynamics, state.model
     members = jnp.concatenate(
         [m[..., None] if m.ndim == 2 else m for m in
@@ -281,5 +283,11 @@ def test_a_penalty_takes_its_weight_times_the_ensembles_disagreement_from_each_r
         np.asarray(steps[0.0][2]) - np.asarray(steps[2.5][2]), 2.5 * d_rel, rtol=1e-4
     )
     np.testing.assert_array_equal(np.asarray(steps[0.0][0]), np.asarray(steps[2.5][0]))
-    with pytest.raises(ValueError, match="penalty must be >= 0"):
-        validate(from_preset("paper", env="cartpole-v1", algo="ldn", model={"penalty": -1.0}))
+    ensemble = {"ld": "ensemble", "ensemble": 3}
+    for model, needle in [
+        ({**ensemble, "penalty": -1.0}, "penalty must be >= 0"),
+        ({"penalty": 1.0}, "penalty reads an ensemble's uncertainty"),  # ld "m0"
+        ({**ensemble, "penalty": 1.0, "world": "true"}, "world 'true' takes the real env's"),
+    ]:
+        with pytest.raises(ValueError, match=needle):
+            validate(from_preset("paper", env="cartpole-v1", algo="ldn", model=model))

@@ -92,6 +92,5 @@ class A2C(ActorCritic):
         """
         segment = canonical(segment)
         grads, info = jax.grad(self.loss, has_aux=True)(state.params, segment)
-        updates, opt_state = self.optimizer.update(grads, state.opt_state, state.params)
-        new = LearnerState(optax.apply_updates(state.params, updates), opt_state)
+        new = self.apply_gradients(state, grads)
         return keep_if_any(new, state, segment.weight), info

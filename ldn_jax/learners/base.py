@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+
 import jax
 import jax.numpy as jnp
 import optax
@@ -242,6 +244,9 @@ class ActorCritic:
 
     optimizer: object
 
+    frozen: tuple[str, ...] = ()
+    """Top-level entries of the params that updates do not move (`freezing`)."""
+
     def __init__(self, config: AgentConfig, obs_size: int, action_spec, workers: int = 1):
         """`action_spec`: an env's `ActionSpec`, or the number of discrete actions; `workers`:
         how many real workers play (the running returns of `normalize_reward`)."""
@@ -280,6 +285,29 @@ class ActorCritic:
                 "count": jnp.zeros(()),
             }
         return LearnerState(params=params, opt_state=self.optimizer.init(params))
+
+    def freezing(self, names: tuple[str, ...]) -> ActorCritic:
+        """This learner with the params entries `names` frozen: each step's gradients and
+        updates for them are zero, so they do not move, and a global-norm clip or PPO's KL
+        guard sees only the rest. Their optimiser moments still take each step (decay, count);
+        `rollout.keep_leaves` puts those back."""
+        learner = copy.copy(self)
+        learner.frozen = tuple(names)
+        return learner
+
+    def apply_gradients(self, state: LearnerState, grads: dict) -> LearnerState:
+        """One optimiser step from `grads`, frozen entries (`freezing`) left as they are."""
+        grads = self._unfrozen(grads)
+        updates, opt_state = self.optimizer.update(grads, state.opt_state, state.params)
+        updates = self._unfrozen(updates)
+        return LearnerState(optax.apply_updates(state.params, updates), opt_state)
+
+    def _unfrozen(self, tree: dict) -> dict:
+        if not self.frozen:
+            return tree
+        return {
+            n: jax.tree.map(jnp.zeros_like, v) if n in self.frozen else v for n, v in tree.items()
+        }
 
     def per_net(self, actor, critic) -> optax.GradientTransformation:
         """One optimiser for the actor's parameters (its log std too) and one for the

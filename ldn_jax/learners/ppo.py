@@ -169,8 +169,7 @@ class PPO(ActorCritic):
     def minibatch_step(self, state: LearnerState, batch: Batch) -> tuple[LearnerState, tuple]:
         """One Adam step; a minibatch without live rows leaves `state` unchanged."""
         grads, info = jax.grad(self.loss, has_aux=True)(state.params, batch)
-        updates, opt_state = self.optimizer.update(grads, state.opt_state, state.params)
-        new = LearnerState(optax.apply_updates(state.params, updates), opt_state)
+        new = self.apply_gradients(state, grads)
         return keep_if_any(new, state, batch.weight), (info, batch.weight.sum() > 0)
 
     def _guarded_step(self, carry: tuple[LearnerState, Array], batch: Batch):
