@@ -534,6 +534,20 @@ def test_the_branched_study_adds_seeds_to_a_finished_run_and_merges_their_rows(
     assert branched.config_of("hopper", "ld", 5, 100, first_seed=5).first_seed == 5
 
 
+def test_the_late_training_return_reads_the_last_tenth_of_the_budget():
+    from experiments.paper import branched
+
+    # Two seeds, five iterations of 200 steps each (budget 1,000): the last tenth is the
+    # iteration past 900 steps; seed 1 ended no episode there (NaN).
+    steps = np.array([[[200, 400, 600, 800, 1000], [200, 400, 600, 800, 1000]]])
+    returns = np.array([[[1.0, 2.0, 3.0, 4.0, 5.0], [1.0, 2.0, 3.0, 4.0, np.nan]]])
+    late = branched.late_returns({"env_steps": steps, "episode_return": returns}, 1000)
+    assert late[0] == 5.0 and np.isnan(late[1])
+    assert branched.late_returns({"env_steps": steps, "episode_return": returns}, 700) == [4.5, 4.0]
+    row = {"late_return": None}
+    assert branched._late_text(row) == "–"
+
+
 def test_the_branched_study_keeps_earlier_rows_and_names_each_envs_seeds(tmp_path):
     from experiments.paper import branched
 
@@ -548,6 +562,7 @@ def test_the_branched_study_keeps_earlier_rows_and_names_each_envs_seeds(tmp_pat
     assert [(r["env"], r["rule"]) for r in earlier] == [("hopper", "ppo"), ("hopper", "cap-5")]
     text = branched.section(earlier)
     assert "### hopper, 100 steps, 3 seeds" in text
+    assert "| training return, last 10% of steps |" in text and "| 10 [10, 10] | – |" in text
     assert "no rule, cut at 5 steps: beats PPO (P 1.00)" in text
     assert "LD draw against" not in text  # no LD row, no question asked
     # The study's question: the LD draw against the field's rules and the best fixed cap.
