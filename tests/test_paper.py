@@ -562,7 +562,9 @@ def test_the_branched_study_keeps_earlier_rows_and_names_each_envs_seeds(tmp_pat
     assert [(r["env"], r["rule"]) for r in earlier] == [("hopper", "ppo"), ("hopper", "cap-5")]
     text = branched.section(earlier)
     assert "### hopper, 100 steps, 3 seeds" in text
-    assert "| training return, last 10% of steps |" in text and "| 10 [10, 10] | – |" in text
+    assert "| training return, last 10% of steps |" in text and "| 3 | 10 [10, 10] | – |" in text
+    text = branched.section([*earlier, row("hopper", "mbpo", 5, 40.0)])
+    assert "### hopper, 100 steps, 3-5 seeds" in text
     assert "no rule, cut at 5 steps: beats PPO (P 1.00)" in text
     assert "LD draw against" not in text  # no LD row, no question asked
     # The study's question: the LD draw against the field's rules and the best fixed cap.

@@ -271,20 +271,21 @@ def section(rows: list[dict]) -> str:
             merit[cap] = (-1.0 if lower else 1.0) * stats.iqm(np.asarray(scores, float))
         best_cap = max(merit, key=merit.get, default=None)
         solving = any(r.get("steps_to_solve") is not None for r in mine.values())
+        counts = sorted({len(r["eval_return"]) for r in mine.values()})
+        seeds = f"{counts[0]}" if len(counts) == 1 else f"{counts[0]}-{counts[-1]}"
         lines += [
-            f"### {env}, {next(iter(mine.values()))['steps']:,} steps, "
-            f"{max(len(r['eval_return']) for r in mine.values())} seeds",
+            f"### {env}, {next(iter(mine.values()))['steps']:,} steps, {seeds} seeds",
             "",
-            "| rule | final moving return |"
+            "| rule | seeds | final moving return |"
             + ("" if solving else " training return, last 10% of steps |")
             + " greedy return |"
             + (" real steps to a greedy 900 | solved |" if solving else "")
             + " P(> PPO) | P(> best cap) | imagined per real step | training s |",
-            "|---|---|---|" + ("---|---|" if solving else "---|") + "---|---|---|---|",
+            "|---|---|---|---|" + ("---|---|" if solving else "---|") + "---|---|---|---|",
         ]
         for row in mine.values():
             lines.append(
-                f"| {RULES[row['rule']][2]} "
+                f"| {RULES[row['rule']][2]} | {len(row['eval_return'])} "
                 f"| {stats.text(stats.estimate(row['final_moving_return']))} "
                 + ("" if solving else f"| {_late_text(row)} ")
                 + f"| {stats.text(stats.estimate(row['eval_return']))} | "
