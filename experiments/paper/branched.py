@@ -12,12 +12,12 @@ policy's log std left to the real updates (`model.imagined_std` "real"), the eli
 as each imagined step (`model.imagined_step` "mean"), the real simulator stepped from the
 imagined states in the model's place (`model.world` "true": what a perfect model would give;
 "true-reward": its reward and termination only; "true-state": its states and termination
-only), eight times the model's fit steps, or the model fitted to the critic's values too
-(`model.value_loss`), or imagined rows that train the critic only
-(`model.imagined_updates`), which are not rules. Per rule and env: IQM [95%
-interval] of the final moving return and of the greedy return after training,
-P(improvement) of the greedy return over PPO and over the best fixed cap, imagined steps per
-real step, and training seconds.
+only), eight times the model's fit steps, the model fitted to the critic's values too
+(`model.value_loss`), imagined rows that train the critic only (`model.imagined_updates`),
+or twice the imagined steps per real one, which are not rules. Per rule and env: IQM [95%
+interval] of the final moving return, of the training return over the last 10% of steps
+and of the greedy return after training, P(improvement) of the greedy return over PPO and
+over the best fixed cap, imagined steps per real step, and training seconds.
 
 Writes DIR/branched/branched.json and branched.md (REPORT.md's section "Stopping rules with
 branched rollouts" is that file), keeping the rows of envs and rules not run this time; runs
@@ -100,6 +100,11 @@ RULES = {
         {"horizon": 5, "world": "true-state"},
         "the real states and termination with the model's reward, cut at 5",
     ),
+    "ratio-8": (
+        "ppo-model",
+        {"horizon": 5, "imagined_ratio": 8.0},
+        "no rule, cut at 5 steps, 8 imagined steps per real one",
+    ),
     "critic-5": (
         "ppo-model",
         {"horizon": 5, "imagined_updates": "critic"},
@@ -111,16 +116,19 @@ RULES = {
 CAPS = ("cap-1", "cap-5", "cap-15")
 
 ONLY = {
-    rule: ("hopper", "halfcheetah")
-    for rule in (
-        "std-real",
-        "fit-400",
-        "value-5",
-        "true-5",
-        "true-reward-5",
-        "true-state-5",
-        "critic-5",
-    )
+    **{
+        rule: ("hopper", "halfcheetah")
+        for rule in (
+            "std-real",
+            "fit-400",
+            "value-5",
+            "true-5",
+            "true-reward-5",
+            "true-state-5",
+            "critic-5",
+        )
+    },
+    "ratio-8": ("halfcheetah",),
 }
 """Rules run on some envs only: inverted_pendulum's PPO has a state-dependent std
 (`std-real`), the pendulum is solved by every rule already, and the perfect-model bounds
