@@ -574,3 +574,42 @@ def test_the_branched_study_keeps_earlier_rows_and_names_each_envs_seeds(tmp_pat
         "The LD draw against the other rules on hopper, P(better): MBPO's horizon schedule, "
         "1 to 15 0.00 [0.00, 0.00]; no rule, cut at 5 steps 1.00 [1.00, 1.00]"
     ) in text
+
+
+def test_the_cached_branched_study_rereads_finished_rows_and_trains_nothing(tmp_path, monkeypatch):
+    from experiments.paper import branched
+
+    runs = tmp_path / "runs" / "branched"
+    for name in ("hopper-ld-s5-100", "hopper-ld-s5+5-100"):
+        (runs / name).mkdir(parents=True)
+        (runs / name / "config.json").write_text("{}")
+    monkeypatch.setattr(branched.RunDir, "is_finished", lambda run: run.path.exists())
+    monkeypatch.setattr(branched.RunDir, "read_summary", lambda run: {"seeds": run.path.name})
+    read = []
+
+    def results_of(env, rule, out, summary, steps):
+        read.append(out.name)
+        return {"env": env, "rule": rule, "steps": steps, "name": branched.RULES[rule][2],
+                "seeds": 5, "final_moving_return": [7.0] * 5, "eval_return": [7.0] * 5,
+                "imagined_per_real": 4.0, "steps_to_solve": None, "train_seconds": 1.0,
+                "late_return": [7.0] * 5}  # fmt: skip
+
+    monkeypatch.setattr(branched, "results_of", results_of)
+    monkeypatch.setattr(branched.common, "ensure_run", lambda *a: pytest.fail("trained"))
+
+    def row(rule, seeds):
+        return {"env": "hopper", "rule": rule, "steps": 100, "name": branched.RULES[rule][2],
+                "seeds": seeds, "final_moving_return": [1.0] * seeds,
+                "eval_return": [1.0] * seeds, "imagined_per_real": 4.0, "steps_to_solve": None,
+                "train_seconds": 1.0}  # fmt: skip
+
+    (tmp_path / "branched").mkdir()
+    (tmp_path / "branched" / "branched.json").write_text(
+        json.dumps({"rows": [row("ld", 10), row("mbpo", 5)]})
+    )
+    assert branched.main(["--cached", "--results", str(tmp_path)]) == 0
+    rows = json.loads((tmp_path / "branched" / "branched.json").read_text())["rows"]
+    assert read == ["hopper-ld-s5-100", "hopper-ld-s5+5-100"]  # the 10-seed row's two parts
+    ld, mbpo = (next(r for r in rows if r["rule"] == rule) for rule in ("ld", "mbpo"))
+    assert ld["eval_return"] == [7.0] * 10 and ld["late_return"] == [7.0] * 10
+    assert mbpo == row("mbpo", 5)  # its runs are not on disk: kept as written

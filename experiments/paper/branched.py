@@ -1,7 +1,7 @@
 """Stopping rules with branched rollouts (ours; the paper has no such study).
 
     python -m experiments.paper.branched [--envs ENV,...] [--rules RULE,...] [--seeds N]
-        [--steps N] [--results DIR]
+        [--steps N] [--results DIR] [--cached]
 
 Under the `branched` preset (short imagined rollouts from real states in a probabilistic
 ensemble, `docs/training.md`), every rule that can end a branch, side by side with the PPO
@@ -356,6 +356,24 @@ def _earlier(path: Path) -> list[dict]:
     return [r for r in rows if r["env"] in BUDGETS and r["rule"] in RULES]
 
 
+def _cached(out: Path, runs: Path, args: argparse.Namespace) -> dict:
+    """`--cached`: the written rows of `args.envs` and `args.rules` re-read from their runs
+    (at each row's seeds and steps) where every part is finished; no training."""
+    rows = {}
+    envs, rules = args.envs.split(","), args.rules.split(",")
+    for row in _earlier(out / "branched.json"):
+        env, rule, steps = row["env"], row["rule"], row["steps"]
+        if env not in envs or rule not in rules:
+            continue
+        dirs = run_dirs(runs, env, rule, len(row["eval_return"]), steps)
+        if all(RunDir(run).is_finished() for _, _, run in dirs):
+            parts = [
+                results_of(env, rule, run, RunDir(run).read_summary(), steps) for _, _, run in dirs
+            ]
+            rows[env, rule] = merged(parts)
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--envs", default=",".join(BUDGETS))
@@ -363,11 +381,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--steps", type=int, default=None, help="every env's budget instead")
     parser.add_argument("--results", type=Path, default=common.RESULTS)
+    parser.add_argument(
+        "--cached",
+        action="store_true",
+        help="train nothing: re-read each written row of ENVS and RULES from its runs, at the "
+        "row's own seeds, where they are all finished (rows of runs no longer on disk stay)",
+    )
     args = parser.parse_args(argv)
     out = common.out_dir(args.results, "branched")
     runs = args.results / "runs" / "branched"
-    mine = {}
-    for env in args.envs.split(","):
+    mine = _cached(out, runs, args) if args.cached else {}
+    for env in [] if args.cached else args.envs.split(","):
         steps = args.steps or BUDGETS[env]
         for rule in args.rules.split(","):
             if env not in ONLY.get(rule, (env,)):
