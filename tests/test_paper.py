@@ -537,15 +537,36 @@ def test_the_branched_study_adds_seeds_to_a_finished_run_and_merges_their_rows(
 def test_the_late_training_return_reads_the_last_tenth_of_the_budget():
     from experiments.paper import branched
 
-    # Two seeds, five iterations of 200 steps each (budget 1,000): the last tenth is the
-    # iteration past 900 steps; seed 1 ended no episode there (NaN).
-    steps = np.array([[[200, 400, 600, 800, 1000], [200, 400, 600, 800, 1000]]])
-    returns = np.array([[[1.0, 2.0, 3.0, 4.0, 5.0], [1.0, 2.0, 3.0, 4.0, np.nan]]])
-    late = branched.late_returns({"env_steps": steps, "episode_return": returns}, 1000)
-    assert late[0] == 5.0 and np.isnan(late[1])
-    assert branched.late_returns({"env_steps": steps, "episode_return": returns}, 700) == [4.5, 4.0]
-    row = {"late_return": None}
-    assert branched._late_text(row) == "–"
+    # Two seeds, three iterations of two episode slots each (budget 1,000): the episodes
+    # that ended past 900 steps count, each once; seed 1 ended none there.
+    ended = np.array(
+        [
+            [
+                [[True, False], [True, True], [True, True]],
+                [[True, False], [True, False], [False, False]],
+            ]
+        ]
+    )
+    steps_at = np.array([[[[300, 0], [600, 905], [950, 1000]], [[300, 0], [600, 0], [0, 0]]]])
+    returns = np.array(
+        [[[[1.0, 0.0], [2.0, 3.0], [4.0, 8.0]], [[1.0, 0.0], [2.0, 0.0], [0.0, 0.0]]]]
+    )
+    env_steps = np.array([[[300, 905, 1000], [300, 600, 1000]]])
+    history = {"env_steps": env_steps, "returns": returns, "ended": ended, "steps_at": steps_at}
+    assert branched.late_returns(history, 1000) == [5.0, None]  # (3 + 4 + 8) / 3
+    # Schedule "episodes": every worker's episode of an iteration past the mark counts.
+    history = {"env_steps": env_steps, "returns": returns}
+    assert branched.late_returns(history, 1000) == [4.25, 0.0]  # (2 + 3 + 4 + 8) / 4
+    with pytest.raises(ValueError, match="one K"):
+        branched.late_returns({**history, "env_steps": np.repeat(env_steps, 2, 0)}, 1000)
+    assert branched._late_text({"late_return": None}) == "–"
+    assert branched._late_text({"late_return": [None, None]}) == "–"
+    assert branched._late_text({"late_return": [2.0, None, 2.0]}) == "2 [2, 2]"
+    parts = [{"late_return": [1.0]}, {"late_return": None}]
+    rows = [{**p, "seeds": 1, "imagined_per_real": 0.0, "train_seconds": 1.0,
+             "final_moving_return": [0.0], "eval_return": [0.0], "steps_to_solve": None}
+            for p in parts]  # fmt: skip
+    assert branched.merged(rows)["late_return"] is None
 
 
 def test_the_branched_study_keeps_earlier_rows_and_names_each_envs_seeds(tmp_path):
@@ -607,9 +628,21 @@ def test_the_cached_branched_study_rereads_finished_rows_and_trains_nothing(tmp_
     (tmp_path / "branched" / "branched.json").write_text(
         json.dumps({"rows": [row("ld", 10), row("mbpo", 5)]})
     )
+    real_cached = branched._cached
+
+    def cached_then_rewritten(out, runs, args):
+        """Another call rewrites the mbpo row while this one re-reads its runs."""
+        found = real_cached(out, runs, args)
+        (runs / "hopper-mbpo-s5-100").mkdir()
+        found["hopper", "mbpo"] = ({**row("mbpo", 5), "eval_return": [9.0] * 5}, row("mbpo", 5))
+        rewritten = {**row("mbpo", 5), "train_seconds": 3.0}
+        (out / "branched.json").write_text(json.dumps({"rows": [row("ld", 10), rewritten]}))
+        return found
+
+    monkeypatch.setattr(branched, "_cached", cached_then_rewritten)
     assert branched.main(["--cached", "--results", str(tmp_path)]) == 0
     rows = json.loads((tmp_path / "branched" / "branched.json").read_text())["rows"]
     assert read == ["hopper-ld-s5-100", "hopper-ld-s5+5-100"]  # the 10-seed row's two parts
     ld, mbpo = (next(r for r in rows if r["rule"] == rule) for rule in ("ld", "mbpo"))
     assert ld["eval_return"] == [7.0] * 10 and ld["late_return"] == [7.0] * 10
-    assert mbpo == row("mbpo", 5)  # its runs are not on disk: kept as written
+    assert mbpo == {**row("mbpo", 5), "train_seconds": 3.0}  # the other call's row stays

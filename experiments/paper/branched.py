@@ -189,8 +189,8 @@ def merged(parts: list[dict]) -> dict:
     parts' sum, each part one program)."""
     row = dict(parts[0])
     for name in ("final_moving_return", "eval_return", "steps_to_solve", "late_return"):
-        if row.get(name) is not None:
-            row[name] = [x for part in parts for x in part[name]]
+        lists = [part.get(name) for part in parts]
+        row[name] = None if None in lists else [x for values in lists for x in values]
     row["seeds"] = sum(part["seeds"] for part in parts)
     imagined = sum(part["imagined_per_real"] * part["seeds"] for part in parts)
     row["imagined_per_real"] = imagined / row["seeds"]
@@ -224,16 +224,21 @@ LATE = 0.9
 """The late training return reads the iterations after this share of the budget."""
 
 
-def late_returns(history: dict, steps: int) -> list[float]:
-    """Each seed's mean training-episode return over the iterations after `LATE` of the
-    budget (K = 1): where the stochastic policy stands at the end. The moving return (decay
-    0.99, about the last 100 episodes) averages far back on a task of 1,000-step episodes:
-    200 episodes per seed in 200k steps."""
-    late = history["env_steps"][0] > LATE * steps
-    returns = np.where(late, history["episode_return"][0], np.nan)
-    return [
-        float(np.nanmean(seed)) if np.isfinite(seed).any() else float("nan") for seed in returns
-    ]
+def late_returns(history: dict, steps: int) -> list[float | None]:
+    """Each seed's mean return over its training episodes that ended after `LATE` of the
+    budget (K = 1; None where none did): where the stochastic policy stands at the end. The
+    moving return (decay 0.99, about the last 100 episodes) averages far back on a task of
+    1,000-step episodes: 200 episodes per seed in 200k steps. Under schedule "episodes"
+    (no per-episode step counts) an iteration's episodes count where the iteration ends
+    after it."""
+    if history["env_steps"].shape[0] != 1:
+        raise ValueError("the late return reads runs of one K")
+    returns = history["returns"][0]
+    if "ended" in history:
+        late = history["ended"][0] & (history["steps_at"][0] > LATE * steps)
+    else:
+        late = np.broadcast_to((history["env_steps"][0] > LATE * steps)[..., None], returns.shape)
+    return [float(r[m].mean()) if m.any() else None for r, m in zip(returns, late, strict=True)]
 
 
 def _score(row: dict) -> tuple[list, bool]:
@@ -328,8 +333,8 @@ def section(rows: list[dict]) -> str:
 
 def _late_text(row: dict) -> str:
     """The late training return's IQM [95%], or "–" for a row written before it was read."""
-    late = row.get("late_return")
-    return "–" if late is None else stats.text(stats.estimate(late))
+    late = [x for x in row.get("late_return") or [] if x is not None]
+    return stats.text(stats.estimate(late)) if late else "–"
 
 
 LD_RIVALS = ("mbpo", "m2ac", "macura")
@@ -356,9 +361,16 @@ def _earlier(path: Path) -> list[dict]:
     return [r for r in rows if r["env"] in BUDGETS and r["rule"] in RULES]
 
 
+def _same_row(row: dict | None, other: dict) -> bool:
+    return row is not None and all(
+        row[name] == other[name] for name in ("eval_return", "train_seconds")
+    )
+
+
 def _cached(out: Path, runs: Path, args: argparse.Namespace) -> dict:
-    """`--cached`: the written rows of `args.envs` and `args.rules` re-read from their runs
-    (at each row's seeds and steps) where every part is finished; no training."""
+    """`--cached`: `{(env, rule): (row, written row)}`, the written rows of `args.envs` and
+    `args.rules` re-read from their runs (at each row's seeds and steps, the runs
+    `run_dirs` names for them now) where every part is finished; no training."""
     rows = {}
     envs, rules = args.envs.split(","), args.rules.split(",")
     for row in _earlier(out / "branched.json"):
@@ -370,7 +382,7 @@ def _cached(out: Path, runs: Path, args: argparse.Namespace) -> dict:
             parts = [
                 results_of(env, rule, run, RunDir(run).read_summary(), steps) for _, _, run in dirs
             ]
-            rows[env, rule] = merged(parts)
+            rows[env, rule] = merged(parts), row
     return rows
 
 
@@ -388,9 +400,14 @@ def main(argv: list[str] | None = None) -> int:
         "row's own seeds, where they are all finished (rows of runs no longer on disk stay)",
     )
     args = parser.parse_args(argv)
+    unknown = [n for n in args.envs.split(",") if n not in BUDGETS]
+    unknown += [n for n in args.rules.split(",") if n not in RULES]
+    if unknown:
+        parser.error(f"unknown env or rule: {', '.join(unknown)}")
     out = common.out_dir(args.results, "branched")
     runs = args.results / "runs" / "branched"
-    mine = _cached(out, runs, args) if args.cached else {}
+    refreshed = _cached(out, runs, args) if args.cached else {}
+    mine = {}
     for env in [] if args.cached else args.envs.split(","):
         steps = args.steps or BUDGETS[env]
         for rule in args.rules.split(","):
@@ -403,6 +420,9 @@ def main(argv: list[str] | None = None) -> int:
             mine[env, rule] = merged(parts)
     # Read only now, so that rows another call wrote while these trained stay.
     rows = {(r["env"], r["rule"]): r for r in _earlier(out / "branched.json")} | mine
+    for key, (row, started) in refreshed.items():  # unless another call rewrote it meanwhile
+        if _same_row(rows.get(key), started):
+            rows[key] = row
     envs, rules = list(BUDGETS), list(RULES)
     ordered = [
         rows[key] for key in sorted(rows, key=lambda k: (envs.index(k[0]), rules.index(k[1])))
