@@ -134,6 +134,7 @@ TASKS: dict[str, dict[str, object]] = {
     "walker2d": {**_LONG, "learners": _HOPPING},
     # No support box: every imagined episode left it within 1-6 steps in 105 dimensions.
     "ant": {**_LONG, "learners": _HOPPING, "model.support": None},
+    "ant-nocfrc": {**_LONG, "learners": _HOPPING, "model.support": None},
     "reacher": _LONG,
 }
 """Per task: top-level and model fields, and `"learners"`: learner -> agent fields."""
@@ -209,6 +210,7 @@ PRESETS["branched"] = {
         "hopper": _ONE_MUJOCO_ROLLOUT,
         "walker2d": _ONE_MUJOCO_ROLLOUT,
         "ant": _ONE_MUJOCO_ROLLOUT,
+        "ant-nocfrc": _ONE_MUJOCO_ROLLOUT,
         "reacher": {"iteration_steps": 100},
     },
 }

@@ -25,6 +25,7 @@ pytestmark = pytest.mark.mujoco
 # Documented sizes, spelled out so that a change in a definition fails here.
 SIZES = {  # task: (obs, action)
     "ant": (105, 8),
+    "ant-nocfrc": (27, 8),
     "halfcheetah": (17, 6),
     "hopper": (11, 3),
     "reacher": (10, 2),
@@ -66,7 +67,9 @@ def _parity(task: str) -> dict:
     t = TASKS[task]
     env, params = _params(task, max_steps=PARITY_STEPS)
     with model.settotalmass_ignored():
-        g = gymnasium.make(t.gymnasium_id, max_episode_steps=PARITY_STEPS)
+        g = gymnasium.make(
+            t.gymnasium_id, max_episode_steps=PARITY_STEPS, **dict(t.gymnasium_kwargs)
+        )
     gym_obs, _ = g.reset(seed=3)
     engine = native.engine(t)
     bits = engine.from_state(_gym_state(g))
@@ -115,7 +118,7 @@ def test_native_matches_gymnasium_for_200_steps(task):
     # gymnasium's TimeLimit may report both flags; ours never does (terminated wins).
     np.testing.assert_array_equal(ours["truncated"], gym["truncated"] & ~gym["terminated"])
     assert ours["truncated"][-1] or ours["terminated"][-1]
-    if task in ("hopper", "walker2d", "ant", "inverted_pendulum"):
+    if task in ("hopper", "walker2d", "ant", "ant-nocfrc", "inverted_pendulum"):
         assert gym["terminated"].any()  # random actions do reach the termination test
     assert np.abs(np.diff(gym["obs"], axis=0)).max() > 1e-2  # the envs did move
 
@@ -133,7 +136,7 @@ def test_sizes_and_control_ranges_match_the_models(task):
     obs, _ = env.reset(jax.random.key(0), params)
     assert obs.shape == (obs_size,) and obs.dtype == jnp.float32
     with model.settotalmass_ignored():
-        g = gymnasium.make(TASKS[task].gymnasium_id)
+        g = gymnasium.make(TASKS[task].gymnasium_id, **dict(TASKS[task].gymnasium_kwargs))
     assert g.observation_space.shape == (obs_size,)
 
 
@@ -386,7 +389,7 @@ def test_every_task_plays_gymnasiums_step_limit_and_the_paper_reacher_its_1000()
     assert Trainer(cartpole).max_steps == 7 and cartpole.steps_per_iteration == 10
 
 
-@pytest.mark.parametrize("task", ["halfcheetah", "hopper", "inverted_pendulum"])
+@pytest.mark.parametrize("task", ["halfcheetah", "hopper", "inverted_pendulum", "ant-nocfrc"])
 def test_a_state_rebuilt_from_an_observation_steps_as_the_env_does(task):
     """`from_observation` puts the env in the state an observation describes (x position 0):
     stepped from the observations of a real rollout it must give the rollout's own next
@@ -408,7 +411,11 @@ def test_a_state_rebuilt_from_an_observation_steps_as_the_env_does(task):
     obs, want_obs, want_reward, want_term = jax.vmap(first_steps)(keys, actions)
     got_obs, got_reward, got_term = true_world(env, params)(jax.random.key(0), obs, actions)
     np.testing.assert_allclose(got_obs, want_obs, rtol=1e-4, atol=1e-4)
-    np.testing.assert_allclose(got_reward, want_reward, rtol=1e-4, atol=1e-4)
+    # ant's forward velocity reads the torso frame's x as MuJoCo's data holds it after a step
+    # (as gymnasium does), which lags the step's last integration; a rebuilt state's frame is
+    # at its position exactly, so its first reward differs by about 2e-4 (measured).
+    tolerance = 1e-3 if task.startswith("ant") else 1e-4
+    np.testing.assert_allclose(got_reward, want_reward, rtol=1e-4, atol=tolerance)
     np.testing.assert_array_equal(got_term, want_term)
     # A step off is not within the tolerance (the test can fail).
     assert np.abs(np.asarray(got_obs) - np.asarray(obs)).max() > 1e-3

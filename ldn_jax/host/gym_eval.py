@@ -25,6 +25,9 @@ GYMNASIUM_IDS = {
 }
 """Our env names whose gymnasium registration is the same task as ours."""
 
+GYMNASIUM_KWARGS = {name: dict(task.gymnasium_kwargs) for name, task in envs.mujoco.TASKS.items()}
+"""`gymnasium.make` arguments beside the id, where our task is not the id's default."""
+
 CUSTOM_CARTPOLES = ("cartpole-v0", "cartpole-v2")
 """Built from `CartPoleEnv` and our `EnvParams` (step limit, force table)."""
 
@@ -52,7 +55,8 @@ def gymnasium_name(env: str) -> str:
     """How `env` is called on the gymnasium side (for reports)."""
     if env in CUSTOM_CARTPOLES:
         return f"CartPoleEnv+ForceTable({env})"
-    return GYMNASIUM_IDS[env]
+    kwargs = ", ".join(f"{k}={v}" for k, v in GYMNASIUM_KWARGS.get(env, {}).items())
+    return f"{GYMNASIUM_IDS[env]}({kwargs})" if kwargs else GYMNASIUM_IDS[env]
 
 
 def make_env(
@@ -70,7 +74,8 @@ def make_env(
     if env in GYMNASIUM_IDS:
         with settotalmass_ignored():  # HalfCheetah-v5's model warns on every compile
             limit = {} if max_steps is None else {"max_episode_steps": max_steps}
-            made = gymnasium.make(GYMNASIUM_IDS[env], render_mode=render_mode, **limit)
+            kwargs = {**GYMNASIUM_KWARGS.get(env, {}), **limit}
+            made = gymnasium.make(GYMNASIUM_IDS[env], render_mode=render_mode, **kwargs)
         ours, params = envs.make(env)
         spec = ours.action_spec(params)
         if not spec.discrete:  # our bounds ([-1, 1]) onto gymnasium's (e.g. [-3, 3])

@@ -10,11 +10,13 @@ termination, written once in JAX over the physics state) runs on:
 Both step gymnasium's own model files, so a policy trained here is evaluated in gymnasium on
 the task it learned. Episodes truncate at `EnvParams.max_steps` (the paper's 1,000);
 `truncated` is never true together with `terminated`. Each task is gymnasium's
-`Task.gymnasium_id` (`Ant-v5`, ...) with its default arguments:
+`Task.gymnasium_id` (`Ant-v5`, ...) with its default arguments (`ant-nocfrc`: Ant-v5 with
+`include_cfrc_ext_in_observation=False`):
 
 | task              | obs | layout                                         | act |
 |-------------------|-----|------------------------------------------------|-----|
 | ant               | 105 | qpos[2:] (13), qvel (14), clip(cfrc_ext[1:])   | 8   |
+| ant-nocfrc        | 27  | qpos[2:] (13), qvel (14)                       | 8   |
 | halfcheetah       | 17  | qpos[1:] (8), qvel (9)                         | 6   |
 | hopper            | 11  | qpos[1:] (5), clip(qvel, +-10) (6)             | 3   |
 | reacher           | 10  | cos, sin of 2 angles, target xy, 2 velocities, | 2   |
