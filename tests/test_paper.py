@@ -490,7 +490,7 @@ def test_the_locomotion_study_states_each_tasks_ratio_to_the_zoo(tmp_path):
     )
     assert (
         "At the zoo's figure or above: ant (1 of 2 tasks). Not measured yet: halfcheetah, "
-        "walker2d. Not in the figure (its curve was not kept): ant." in text
+        "walker2d, ant-nocfrc. Not in the figure (its curve was not kept): ant." in text
     )
     locomotion.curves(rows, tmp_path / "curves.png")  # from the kept curves, without the runs
     assert (tmp_path / "curves.png").stat().st_size > 0
