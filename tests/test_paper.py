@@ -474,6 +474,11 @@ def test_the_cpu_full_scale_runs_every_mujoco_table_at_1m_steps_with_5_seeds():
         assert (config.seeds, config.steps, config.episode_limit) == (5, 1_000_000, 1000)
     cartpole = common.run_config(scale, "cartpole-v2", "ldn")
     assert cartpole == common.run_config(common.SCALES["cpu"], "cartpole-v2", "ldn")
+    # its CartPole runs are the cpu scale's, trained once; its MuJoCo runs its own
+    cpu = common.SCALES["cpu"]
+    assert common.run_dir(Path("r"), scale, cartpole) == common.run_dir(Path("r"), cpu, cartpole)
+    hopper = common.run_config(scale, "hopper", "ppo")
+    assert common.run_dir(Path("r"), scale, hopper) == Path("r/runs/cpu-full/hopper-ppo")
 
 
 def test_the_locomotion_study_states_each_tasks_ratio_to_the_zoo(tmp_path):
@@ -646,3 +651,30 @@ def test_the_cached_branched_study_rereads_finished_rows_and_trains_nothing(tmp_
     ld, mbpo = (next(r for r in rows if r["rule"] == rule) for rule in ("ld", "mbpo"))
     assert ld["eval_return"] == [7.0] * 10 and ld["late_return"] == [7.0] * 10
     assert mbpo == {**row("mbpo", 5), "train_seconds": 3.0}  # the other call's row stays
+
+
+def test_the_family_study_says_which_model_runs_never_imagined(tmp_path):
+    from experiments.paper import common, family, targets
+
+    curve = {"env_steps": [0, 500_000], "moving_return": [[0.0, 100.0], [0.0, 300.0]]}
+    a2c = {"env": "hopper", "algo": "a2c", "seeds": 2, "steps": 1_000_000, "diverged": 0}
+    a2c |= {"final_moving_return": [100.0, 300.0], "eval_return": [150.0, 250.0]}
+    a2c |= {"imagined_steps": None, "wall_seconds": 300.0, "curve": curve}
+    ldn = {**a2c, "algo": "ldn", "imagined_steps": [0, 4000]}
+    text = family.section([a2c, ldn])
+    assert "| hopper | A3C | 1,000,000 | 2 |" in text and "| 150, 250 | – | 0 | 300 |" in text
+    assert "| hopper | MBRL-LDN |" in text and "| 2,000 (1 of 2 seeds none) | 0 | 300 |" in text
+    assert "Not measured yet: inverted_pendulum a2c," in text and "hopper a2c-model" in text
+    family.curves([a2c, ldn], tmp_path / "family.png")  # from the kept curves, without the runs
+    assert (tmp_path / "family.png").stat().st_size > 0
+    config = family.config_of("ant", "a2c-model", 5)
+    assert (config.algo, config.seeds, config.steps) == ("a2c-model", 5, 1_000_000)
+    # inverted_pendulum's runs are the targets' (one config, trained once for both)
+    pendulum = family.config_of("inverted_pendulum", "ldn", 5)
+    assert family.run_dir(Path("r"), "inverted_pendulum", "ldn", 5) == targets.run_dir(
+        Path("r"), common.SCALES["cpu"], pendulum
+    )
+    assert family.run_dir(Path("r"), "hopper", "ldn", 5) == Path("r/runs/family/hopper-ldn-s5")
+    with pytest.raises(SystemExit) as bad:
+        family.main(["--algos", "ppo", "--results", str(tmp_path)])
+    assert bad.value.code == 2

@@ -265,12 +265,15 @@ def run_config(scale: Scale, env: str, algo: str, k: tuple[float, ...] = (1.0,),
 
 
 def run_dir(results: Path, scale: Scale, config: Config) -> Path:
+    """Under the scale's name; cpu-full's CartPole runs are the cpu scale's (the same configs,
+    trained once for both)."""
+    folder = "cpu" if scale.name == "cpu-full" and config.env not in MUJOCO else scale.name
     name = f"{config.env}-{config.algo}"
     if config.model.ld != "m0":
         name += f"-{config.model.ld}"
     if len(config.k) > 1 or config.k != (1.0,):
         name += "-k" + ",".join(f"{k:g}" for k in config.k)
-    return results / "runs" / scale.name / name
+    return results / "runs" / folder / name
 
 
 def ensure_run(config: Config, out: Path) -> dict:

@@ -60,7 +60,7 @@ def row_of(env: str, out: Path, summary: dict) -> dict:
         "ratio": greedy["iqm"] / ZOO[env],
         "wall_seconds": summary["train_seconds"] + summary["compile_seconds"],
         "diverged": sum(bool(r["diverged"]) for r in runs),
-        "curve": _curve(history),
+        "curve": kept_curve(history),
     }
 
 
@@ -69,7 +69,7 @@ CURVE_POINTS = 100
 again without the runs (they are not kept in git)."""
 
 
-def _curve(history: dict) -> dict:
+def kept_curve(history: dict) -> dict:
     """Every seed's moving return and the mean env steps, at `CURVE_POINTS` iterations."""
     moving, steps = history["moving_return"][0], history["env_steps"][0].mean(axis=0)
     keep = np.unique(np.linspace(0, steps.shape[0] - 1, CURVE_POINTS).round().astype(int))
@@ -178,7 +178,7 @@ def _write(out: Path, record: Path, rows: list[dict], results: Path) -> None:
     for row in rows:  # a row recorded before rows kept their curve: from its run, if at hand
         run = run_dir(results, row["env"], row["seeds"])
         if "curve" not in row and (run / "summary.json").exists():
-            row["curve"] = _curve(common.load_history(run))
+            row["curve"] = kept_curve(common.load_history(run))
     (out / "locomotion.md").write_text(section(rows))
     common.write_json(record, {"machine": common.machine(), "rows": rows})
     curves(rows, out / "locomotion.png")

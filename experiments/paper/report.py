@@ -165,8 +165,8 @@ def render(results: Path, scale: common.Scale) -> str:
     ]
     for section in (setup(data, scale), summary, *body):
         lines += render_section(section)
-    # The studies run on their own (experiments/paper/locomotion.py and branched.py).
-    for study in ("locomotion", "branched"):
+    # The studies run on their own (experiments/paper/locomotion.py, family.py and branched.py).
+    for study in ("locomotion", "family", "branched"):
         text = results / study / f"{study}.md"
         if text.exists():
             lines += ["", text.read_text().strip(), ""]
