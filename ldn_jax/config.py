@@ -318,7 +318,7 @@ class ModelConfig:
     """`probabilistic`, one of `IMAGINED_STEPS`: "sample" (MBPO's, PETS's): a draw from the
     Gaussian of one elite picked at random; "mean": the elites' mean prediction, no draw (a
     simulator is deterministic, and the drawn noise is about half of a hopper model's
-    one-step reward error: docs/benchmarks.md)."""
+    one-step reward error: docs/imagination.md)."""
     world: str = "model"
     """One of `WORLDS`. "model": imagined steps are the model's predictions (the method).
     "true", for studies: the real simulator stepped from each imagined observation stands in

@@ -179,7 +179,7 @@ _ONE_MUJOCO_ROLLOUT = {"iteration_steps": 100, "learners": {"ppo": {"iteration_s
 
 PRESETS["branched"] = {
     # Ours: imagination branched from real states in a probabilistic ensemble (docs/training.md,
-    # "Branched imagination"; the measurements that chose it: docs/benchmarks.md).
+    # "Branched imagination"; the measurements that chose it: docs/imagination.md).
     "schedule": "steps",
     "k": (1.0,),
     "model.imagine_start": "real",
@@ -200,7 +200,7 @@ PRESETS["branched"] = {
     "envs": {
         # A model fit and an imagined batch every 8 workers x 100 real steps (halfcheetah's
         # PPO: x 128, two of its 64-step rollouts).
-        # The pendulum's cut: 15 steps (docs/benchmarks.md: steps to a greedy 900 over 5
+        # The pendulum's cut: 15 steps (docs/imagination.md: steps to a greedy 900 over 5
         # seeds, IQM 13,067 at a cut of 15, 19,200 at 5, 20,000 for PPO).
         "inverted_pendulum": {"iteration_steps": 100, "model.horizon": 15},
         "halfcheetah": {
