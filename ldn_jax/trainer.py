@@ -323,7 +323,7 @@ class Trainer:
             horizon = scheduled_horizon(config, state.env_steps + played)
         frozen = ("actor", "log_std") if config.imagined_updates == "critic" else ()
         player = Player(
-            self.learner.freezing(frozen),
+            self.learner.freezing(frozen).with_epochs(config.imagined_epochs),
             world,
             self.max_steps,
             horizon=horizon,

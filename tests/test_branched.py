@@ -234,6 +234,35 @@ def test_critic_only_imagination_moves_the_critic_and_leaves_the_actor():
     assert moved["critic"] == (False, True, True)
 
 
+def test_imagined_epochs_set_the_passes_over_imagined_rows_only():
+    """`model.imagined_epochs`: the branched stage's PPO updates make that many passes (Adam's
+    step count grows in proportion), while the real stage keeps the learner's own."""
+    steps = {}
+    for epochs in (0, 1, 3):
+        config = _config(algo="ppo-model", model={"imagined_epochs": epochs})
+        trainer = Trainer(config)
+        state = jax.tree.map(lambda x: x[0, 0], trainer.init_batch())
+        buffer = _buffer(
+            23, obs_size=4, action_size=2, capacity=trainer.config.model.buffer_capacity
+        )
+        state = state.replace(
+            buffer=buffer.replace(data=buffer.data.replace(obs=buffer.data.obs * 0.01))
+        )
+        real_state, real = jax.jit(trainer.real_stage)(state, jax.random.key(3))
+        after, _ = jax.jit(trainer.branch_stage)(state, jax.random.key(4), jnp.float32(1.0), real)
+        count = lambda s: max(
+            int(x)
+            for p, x in jax.tree_util.tree_leaves_with_path(s.learner.opt_state)
+            if "count" in jax.tree_util.keystr(p)
+        )
+        steps[epochs] = (count(real_state) - count(state), count(after) - count(state))
+    own = config.agent.epochs
+    assert own not in (1, 3)
+    real_steps = steps[0][0]
+    assert real_steps > 0 and steps[1][0] == steps[3][0] == real_steps
+    assert steps[1][1] > 0 and steps[3][1] == 3 * steps[1][1] and steps[0][1] == own * steps[1][1]
+
+
 @pytest.fixture(scope="module")
 def branched_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("branched")
@@ -304,6 +333,9 @@ def _build(*argv):
         (["--algo", "ldn", "--set", "model.imagined_step=mean"], "it needs model.probabilistic"),
         (["--algo", "ppo-model", "--set", "model.imagined_std=real"], "needs branched imagination"),
         (["--algo", "ldn", "--set", "model.imagined_updates=actor"], "unknown imagined_updates"),
+        (["--algo", "ldn", "--set", "model.imagined_epochs=2"], "A2C makes one update per segment"),
+        (["--algo", "ppo-model", "--set", "model.imagined_epochs=2"], "needs imagine_start 'real'"),
+        (["--algo", "ppo-model", "--set", "model.imagined_epochs=-1"], "must be >= 0, got -1"),
         (
             ["--algo", "ppo-model", "--set", "model.imagined_updates=critic"],
             "imagined_updates 'critic' needs branched imagination",

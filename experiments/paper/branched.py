@@ -14,10 +14,11 @@ imagined states in the model's place (`model.world` "true": what a perfect model
 "true-reward": its reward and termination only; "true-state": its states and termination
 only), eight times the model's fit steps, the model fitted to the critic's values too
 (`model.value_loss`), imagined rows that train the critic only (`model.imagined_updates`),
-or twice the imagined steps per real one, which are not rules. Per rule and env: IQM [95%
-interval] of the final moving return, of the training return over the last 10% of steps
-and of the greedy return after training, P(improvement) of the greedy return over PPO and
-over the best fixed cap, imagined steps per real step, and training seconds.
+twice the imagined steps per real one, or 5 epochs on imagined rows, which are not rules.
+Per rule and env: IQM [95% interval] of the final moving return, of the training return over
+the last 10% of steps and of the greedy return after training, P(improvement) of the greedy
+return over PPO and over the best fixed cap, imagined steps per real step, and training
+seconds.
 
 Writes DIR/branched/branched.json and branched.md (REPORT.md's section "Stopping rules with
 branched rollouts" is that file), keeping the rows of envs and rules not run this time; runs
@@ -105,6 +106,11 @@ RULES = {
         {"horizon": 5, "imagined_ratio": 8.0},
         "no rule, cut at 5 steps, 8 imagined steps per real one",
     ),
+    "epochs-5": (
+        "ppo-model",
+        {"horizon": 5, "imagined_epochs": 5},
+        "no rule, cut at 5 steps, 5 epochs on imagined rows",
+    ),
     "critic-5": (
         "ppo-model",
         {"horizon": 5, "imagined_updates": "critic"},
@@ -129,6 +135,7 @@ ONLY = {
         )
     },
     "ratio-8": ("halfcheetah",),
+    "epochs-5": ("halfcheetah",),
 }
 """Rules run on some envs only: inverted_pendulum's PPO has a state-dependent std
 (`std-real`), the pendulum is solved by every rule already, and the perfect-model bounds

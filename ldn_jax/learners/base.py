@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import dataclasses
 
 import jax
 import jax.numpy as jnp
@@ -293,6 +294,15 @@ class ActorCritic:
         `rollout.keep_leaves` puts those back."""
         learner = copy.copy(self)
         learner.frozen = tuple(names)
+        return learner
+
+    def with_epochs(self, epochs: int) -> ActorCritic:
+        """This learner with `epochs` passes per update (0: its own); the optimiser and
+        everything else are shared."""
+        if epochs == 0 or epochs == self.config.epochs:
+            return self
+        learner = copy.copy(self)
+        learner.config = dataclasses.replace(self.config, epochs=epochs)
         return learner
 
     def apply_gradients(self, state: LearnerState, grads: dict) -> LearnerState:
