@@ -2,6 +2,7 @@
 (tiny budget) by its output files and fields, REPORT.md included."""
 
 import csv
+import dataclasses
 import json
 import os
 import subprocess
@@ -678,3 +679,14 @@ def test_the_family_study_says_which_model_runs_never_imagined(tmp_path):
     with pytest.raises(SystemExit) as bad:
         family.main(["--algos", "ppo", "--results", str(tmp_path)])
     assert bad.value.code == 2
+
+
+def test_the_branched_presets_ppo_ldn_is_the_studys_ld_row_where_it_beat_ppo():
+    from experiments.paper import branched
+    from ldn_jax.config import from_preset, validate
+
+    for env in ("halfcheetah", "inverted_pendulum"):
+        study = branched.config_of(env, "ld", 5, 200_000)
+        user = from_preset("branched", env=env, algo="ppo-ldn", seeds=5, steps=200_000)
+        solved = branched.SOLVED.get(env)
+        assert study == validate(dataclasses.replace(user, solved_return=solved))
