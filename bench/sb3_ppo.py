@@ -7,7 +7,7 @@ gymnasium[mujoco] in an interpreter of their own (`python -m venv V && V/bin/pip
 stable-baselines3 "gymnasium[mujoco]"`). Trains one seed on gymnasium's v5 task with the zoo's
 VecNormalize (observations and rewards), then plays 5 greedy episodes (env seeds 100-104) and
 prints one JSON line: task, seed, steps, training seconds, the greedy returns and their mean.
-docs/benchmarks.md sets its figures beside `ldn-jax eval` of our runs.
+docs/tuning-mujoco.md sets its figures beside `ldn-jax eval` of our runs.
 """
 
 from __future__ import annotations

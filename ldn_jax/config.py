@@ -309,8 +309,8 @@ class ModelConfig:
     """`imagine_start` "real", for PPO: the epochs of each update on imagined rows; 0 takes
     the learner's own (`AgentConfig.epochs`). Imagined rows are fresh every iteration, so
     fewer passes over more of them is a trade the learner's epochs, chosen for scarce real
-    rows, do not make: at halfcheetah's 20 epochs the imagined updates are the larger part
-    of a branched run's time (docs/imagination.md)."""
+    rows, do not make: at halfcheetah's 20 epochs, imagination and its updates are the
+    largest share of a branched run's time (41-48%, docs/imagination.md)."""
     probabilistic: bool = False
     """Each member of the ensemble (`ld` "ensemble" or "variance") outputs a Gaussian over
     the standardised next observation and reward, fitted by negative log-likelihood with
@@ -919,10 +919,14 @@ def validate(config: Config) -> Config:
         ),
         (model.imagined_epochs >= 0, f"imagined_epochs must be >= 0, got {model.imagined_epochs}"),
         (
-            model.imagined_epochs == 0
-            or (model.imagine_start == "real" and config.algorithm.learner == "ppo"),
-            "imagined_epochs sets PPO's epochs on branched imagination's rows: it needs "
-            "imagine_start 'real' and a PPO-family algorithm (A2C makes one update per segment)",
+            model.imagined_epochs == 0 or model.imagine_start == "real",
+            "imagined_epochs sets the epochs on branched imagination's rows: it needs "
+            "imagine_start 'real'",
+        ),
+        (
+            model.imagined_epochs == 0 or config.algorithm.learner == "ppo",
+            f"imagined_epochs sets PPO's epochs; {config.algo} is of the A2C family, which "
+            "makes one update per segment",
         ),
         (model.imagined_ratio > 0, f"imagined_ratio must be > 0, got {model.imagined_ratio}"),
         (0 <= model.real_share < 1, f"real_share must be in [0, 1), got {model.real_share}"),

@@ -333,7 +333,11 @@ def _build(*argv):
         (["--algo", "ldn", "--set", "model.imagined_step=mean"], "it needs model.probabilistic"),
         (["--algo", "ppo-model", "--set", "model.imagined_std=real"], "needs branched imagination"),
         (["--algo", "ldn", "--set", "model.imagined_updates=actor"], "unknown imagined_updates"),
-        (["--algo", "ldn", "--set", "model.imagined_epochs=2"], "A2C makes one update per segment"),
+        (
+            ["--algo", "ldn", "--preset", "branched", "--env", "cartpole-v1",
+             "--set", "model.imagined_epochs=2"],
+            "ldn is of the A2C family",
+        ),
         (["--algo", "ppo-model", "--set", "model.imagined_epochs=2"], "needs imagine_start 'real'"),
         (["--algo", "ppo-model", "--set", "model.imagined_epochs=-1"], "must be >= 0, got -1"),
         (

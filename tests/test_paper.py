@@ -302,6 +302,9 @@ def test_default_budget_targets_are_the_users_commands():
     assert targets.run_config(scale, "inverted_pendulum", "ppo", 5, (1.0,)).steps == 600_000
     out = targets.run_dir(Path("r"), scale, config)
     assert out == Path("r/runs/cpu/targets-halfcheetah-ldn-k0.5,1,2")
+    full = report.common.SCALES["cpu-full"]  # default budgets: the same runs at every scale
+    assert targets.run_config(full, "halfcheetah", "ldn", 10, (0.5, 1.0, 2.0)) == config
+    assert targets.run_dir(Path("r"), full, config) == out
     # PPO on halfcheetah is the locomotion study's run: one config, trained once for both.
     ppo = targets.run_config(scale, "halfcheetah", "ppo", 5, None)
     assert ppo == locomotion.config_of("halfcheetah", 5)
@@ -480,6 +483,14 @@ def test_the_cpu_full_scale_runs_every_mujoco_table_at_1m_steps_with_5_seeds():
     assert common.run_dir(Path("r"), scale, cartpole) == common.run_dir(Path("r"), cpu, cartpole)
     hopper = common.run_config(scale, "hopper", "ppo")
     assert common.run_dir(Path("r"), scale, hopper) == Path("r/runs/cpu-full/hopper-ppo")
+    from experiments.paper import stops
+
+    rule = stops.dir_of(Path("r"), scale, cartpole, "m2ac")  # the stopping-rule study's too
+    assert (
+        rule
+        == stops.dir_of(Path("r"), cpu, cartpole, "m2ac")
+        == Path("r/runs/cpu/stops-cartpole-v2-m2ac")
+    )
 
 
 def test_the_locomotion_study_states_each_tasks_ratio_to_the_zoo(tmp_path):
@@ -671,10 +682,13 @@ def test_the_family_study_says_which_model_runs_never_imagined(tmp_path):
     config = family.config_of("ant", "a2c-model", 5)
     assert (config.algo, config.seeds, config.steps) == ("a2c-model", 5, 1_000_000)
     # inverted_pendulum's runs are the targets' (one config, trained once for both)
-    pendulum = family.config_of("inverted_pendulum", "ldn", 5)
-    assert family.run_dir(Path("r"), "inverted_pendulum", "ldn", 5) == targets.run_dir(
-        Path("r"), common.SCALES["cpu"], pendulum
-    )
+    cpu = common.SCALES["cpu"]
+    for algo in family.ALGOS:
+        pendulum = targets.run_config(cpu, "inverted_pendulum", algo, 5, (1.0,))
+        assert family.config_of("inverted_pendulum", algo, 5) == pendulum
+        assert family.run_dir(Path("r"), "inverted_pendulum", algo, 5) == targets.run_dir(
+            Path("r"), cpu, pendulum
+        )
     assert family.run_dir(Path("r"), "hopper", "ldn", 5) == Path("r/runs/family/hopper-ldn-s5")
     with pytest.raises(SystemExit) as bad:
         family.main(["--algos", "ppo", "--results", str(tmp_path)])

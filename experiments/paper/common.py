@@ -264,16 +264,20 @@ def run_config(scale: Scale, env: str, algo: str, k: tuple[float, ...] = (1.0,),
     return validate(config)
 
 
+def runs_of(results: Path, scale: Scale, env: str) -> Path:
+    """Where a scale keeps its runs of `env`: under its name, but cpu-full's CartPole runs are
+    the cpu scale's (the same configs, trained once for both)."""
+    shared = scale.name == "cpu-full" and env in CARTPOLE
+    return results / "runs" / ("cpu" if shared else scale.name)
+
+
 def run_dir(results: Path, scale: Scale, config: Config) -> Path:
-    """Under the scale's name; cpu-full's CartPole runs are the cpu scale's (the same configs,
-    trained once for both)."""
-    folder = "cpu" if scale.name == "cpu-full" and config.env not in MUJOCO else scale.name
     name = f"{config.env}-{config.algo}"
     if config.model.ld != "m0":
         name += f"-{config.model.ld}"
     if len(config.k) > 1 or config.k != (1.0,):
         name += "-k" + ",".join(f"{k:g}" for k in config.k)
-    return results / "runs" / folder / name
+    return runs_of(results, scale, config.env) / name
 
 
 def ensure_run(config: Config, out: Path) -> dict:

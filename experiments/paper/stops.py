@@ -136,7 +136,7 @@ def dir_of(results: Path, scale: common.Scale, config: Config, name: str) -> Pat
     if name == "ld-ensemble":
         return plain
     name = {"ld-fig5": "batch"}.get(name, name)  # one run, both studies
-    return results / "runs" / scale.name / f"stops-{config.env}-{name}"
+    return common.runs_of(results, scale, config.env) / f"stops-{config.env}-{name}"
 
 
 def ensure(results, scale, env, name, algo, model, sweep=()) -> dict | None:

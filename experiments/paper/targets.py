@@ -63,11 +63,15 @@ def run_config(scale: common.Scale, env: str, algo: str, seeds: int, k: tuple[fl
 def run_dir(results: Path, scale: common.Scale, config) -> Path:
     """Beside the tables' runs; at the default budgets under their own names, since the
     tables' runs of the same env and algorithm have shorter budgets. PPO on a locomotion task
-    is the locomotion study's run (the same config), trained once for both."""
-    if scale.name != "smoke" and config.algo == "ppo" and config.env in locomotion.ZOO:
+    is the locomotion study's run (the same config), trained once for both. The default
+    budgets do not depend on the scale: every scale but smoke keeps them in the cpu scale's
+    folder."""
+    if scale.name == "smoke":
+        return common.run_dir(results, scale, config)
+    if config.algo == "ppo" and config.env in locomotion.ZOO:
         return locomotion.run_dir(results, config.env, config.seeds)
-    out = common.run_dir(results, scale, config)
-    return out if scale.name == "smoke" else out.with_name("targets-" + out.name)
+    out = common.run_dir(results, common.SCALES["cpu"], config)
+    return out.with_name("targets-" + out.name)
 
 
 def pendulum_row(entry: dict) -> dict:
