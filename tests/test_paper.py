@@ -704,3 +704,30 @@ def test_the_branched_presets_ppo_ldn_is_the_studys_ld_row_where_it_beat_ppo():
         user = from_preset("branched", env=env, algo="ppo-ldn", seeds=5, steps=200_000)
         solved = branched.SOLVED.get(env)
         assert study == validate(dataclasses.replace(user, solved_return=solved))
+
+
+def test_the_branched_studys_figure_draws_from_its_rows_alone(tmp_path):
+    from experiments.paper import branched
+
+    def row(env, rule, scores, solve=None):
+        return {
+            "env": env,
+            "rule": rule,
+            "steps": 1000,
+            "eval_return": scores,
+            "steps_to_solve": solve,
+        }
+
+    rows = [
+        row("hopper", "ppo", [1.0, 2.0, 3.0]),
+        row("hopper", "ld", [2.0, 3.0, 4.0]),
+        row("hopper", "true-5", [5.0, 6.0, 7.0]),
+        row("inverted_pendulum", "ppo", [1.0, 1.0], solve=[300, 500]),
+        row("inverted_pendulum", "cap-15", [1.0, 1.0], solve=[200, 400]),
+    ]
+    branched.figure(rows, tmp_path / "branched.png")
+    assert (tmp_path / "branched.png").stat().st_size > 0
+    assert "![branched](branched/branched.png)" in branched.section(
+        [r | {"name": "", "final_moving_return": [0.0] * 3, "late_return": None,
+              "imagined_per_real": 0.0, "train_seconds": 1.0} for r in rows[:3]]
+    )  # fmt: skip

@@ -20,10 +20,11 @@ the last 10% of steps and of the greedy return after training, P(improvement) of
 return over PPO and over the best fixed cap, imagined steps per real step, and training
 seconds.
 
-Writes DIR/branched/branched.json and branched.md (REPORT.md's section "Stopping rules with
-branched rollouts" is that file), keeping the rows of envs and rules not run this time; runs
-are cached in DIR/runs/branched/ and resumed; more seeds than a finished run has train only
-the seeds after its own (10 seeds: an earlier run of 5, and seeds 5..9).
+Writes DIR/branched/branched.json, branched.md (REPORT.md's section "Stopping rules with
+branched rollouts" is that file) and branched.png (each rule's interval beside PPO's), keeping
+the rows of envs and rules not run this time; runs are cached in DIR/runs/branched/ and
+resumed; more seeds than a finished run has train only the seeds after its own (10 seeds: an
+earlier run of 5, and seeds 5..9).
 """
 
 from __future__ import annotations
@@ -278,7 +279,8 @@ def section(rows: list[dict]) -> str:
         "bootstrap interval]. The greedy return is the trainer's own "
         "evaluation after training (10 episodes). P(improvement) compares greedy returns, or, "
         "where every rule solves the task in the budget, real steps to a greedy return of 900 "
-        "(a run that never gets there counts as the budget plus one step).",
+        "(a run that never gets there counts as the budget plus one step). Figure: each "
+        "rule's IQM and interval beside PPO's, ![branched](branched/branched.png)",
         "",
     ]
     for env in dict.fromkeys(r["env"] for r in rows):
@@ -393,6 +395,55 @@ def _cached(out: Path, runs: Path, args: argparse.Namespace) -> dict:
     return rows
 
 
+def figure(rows: list[dict], path: Path) -> None:
+    """One panel per env: each rule's IQM (dot) and 95% interval (bar) of what it is judged
+    on (`_score`), best at the top, PPO's interval shaded behind; rules that put the real
+    simulator in the model's place (bounds, not methods) in grey."""
+    import matplotlib.pyplot as plt
+
+    envs = list(dict.fromkeys(r["env"] for r in rows))
+    if not envs:
+        return
+    heights = [len([r for r in rows if r["env"] == env]) + 2.5 for env in envs]
+    fig, axes = plt.subplots(
+        len(envs),
+        1,
+        figsize=(10, 0.3 * sum(heights)),
+        dpi=110,
+        squeeze=False,
+        gridspec_kw={"height_ratios": heights},
+    )
+    for ax, env in zip(axes[:, 0], envs, strict=True):
+        mine = [r for r in rows if r["env"] == env]
+        lower = _score(mine[0])[1]
+        marks = []
+        for row in mine:
+            estimate = stats.estimate(_score(row)[0])
+            low, high = estimate["ci95"] or (estimate["iqm"], estimate["iqm"])
+            marks.append((estimate["iqm"], low, high, row))
+        marks.sort(key=lambda m: m[0], reverse=not lower)
+        for y, (iqm, low, high, row) in enumerate(reversed(marks)):
+            bound = RULES[row["rule"]][1].get("world", "model") != "model"
+            color = "grey" if bound else "black" if row["rule"] == "ppo" else "tab:blue"
+            ax.errorbar(iqm, y, xerr=[[iqm - low], [high - iqm]], fmt="o", color=color, capsize=3)
+            if row["rule"] == "ppo":
+                ax.axvspan(low, high, color="black", alpha=0.08, linewidth=0)
+                ax.axvline(iqm, color="black", linewidth=0.8, linestyle="--")
+        labels = [f"{RULES[m[3]['rule']][2]} ({len(m[3]['eval_return'])})" for m in reversed(marks)]
+        ax.set_yticks(range(len(marks)), labels, fontsize=7)
+        ax.set_xlabel(
+            "real steps to a greedy 900 (IQM, 95% interval; fewer is better)"
+            if lower
+            else "greedy return after training (IQM, 95% interval)",
+            fontsize=8,
+        )
+        ax.set_title(f"{env}, {mine[0]['steps']:,} steps (seeds in brackets)", fontsize=9)
+        ax.grid(axis="x", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--envs", default=",".join(BUDGETS))
@@ -436,7 +487,8 @@ def main(argv: list[str] | None = None) -> int:
     ]
     common.write_json(out / "branched.json", {"rows": ordered})
     (out / "branched.md").write_text(section(ordered))
-    print(f"wrote {out}/branched.json and branched.md")
+    figure(ordered, out / "branched.png")
+    print(f"wrote {out}/branched.json, branched.md and branched.png")
     return 0
 
 
