@@ -238,7 +238,7 @@ def test_imagined_epochs_set_the_passes_over_imagined_rows_only():
     """`model.imagined_epochs`: the branched stage's PPO updates make that many passes (Adam's
     step count grows in proportion), while the real stage keeps the learner's own."""
     steps = {}
-    for epochs in (0, 1, 3):
+    for epochs in (0, 3):
         config = _config(algo="ppo-model", model={"imagined_epochs": epochs})
         trainer = Trainer(config)
         state = jax.tree.map(lambda x: x[0, 0], trainer.init_batch())
@@ -256,11 +256,9 @@ def test_imagined_epochs_set_the_passes_over_imagined_rows_only():
             if "count" in jax.tree_util.keystr(p)
         )
         steps[epochs] = (count(real_state) - count(state), count(after) - count(state))
-    own = config.agent.epochs
-    assert own not in (1, 3)
-    real_steps = steps[0][0]
-    assert real_steps > 0 and steps[1][0] == steps[3][0] == real_steps
-    assert steps[1][1] > 0 and steps[3][1] == 3 * steps[1][1] and steps[0][1] == own * steps[1][1]
+    own = config.agent.epochs  # 0 takes the learner's own
+    assert own != 3 and steps[0][0] > 0 and steps[0][0] == steps[3][0]
+    assert steps[3][1] > 0 and steps[0][1] * 3 == steps[3][1] * own
 
 
 @pytest.fixture(scope="module")
