@@ -107,6 +107,11 @@ RULES = {
         {"horizon": 5, "imagined_ratio": 8.0},
         "no rule, cut at 5 steps, 8 imagined steps per real one",
     ),
+    "ld-ratio-8": (
+        "ppo-ldn",
+        {"horizon": 15, "imagined_ratio": 8.0},
+        "LD draw, disagreement, cap 15, 8 imagined steps per real one",
+    ),
     "epochs-5": (
         "ppo-model",
         {"horizon": 5, "imagined_epochs": 5},
@@ -136,6 +141,7 @@ ONLY = {
         )
     },
     "ratio-8": ("halfcheetah",),
+    "ld-ratio-8": ("halfcheetah",),
     "epochs-5": ("halfcheetah",),
 }
 """Rules run on some envs only: inverted_pendulum's PPO has a state-dependent std
