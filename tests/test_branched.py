@@ -197,21 +197,26 @@ def test_a_branch_starts_from_a_state_in_the_real_buffer():
         assert (time <= 4).all()
 
 
+def _stages(trainer: Trainer):
+    """One seed's state over a hand-made buffer, after its real stage, and after a branched
+    stage from it (fed that real play): `(state, after real, after branches)`."""
+    state = jax.tree.map(lambda x: x[0, 0], trainer.init_batch())
+    buffer = _buffer(23, obs_size=4, action_size=2, capacity=trainer.config.model.buffer_capacity)
+    state = state.replace(
+        buffer=buffer.replace(data=buffer.data.replace(obs=buffer.data.obs * 0.01))
+    )
+    real_state, real = jax.jit(trainer.real_stage)(state, jax.random.key(3))
+    after, _ = jax.jit(trainer.branch_stage)(state, jax.random.key(4), jnp.float32(1.0), real)
+    return state, real_state, after
+
+
 def test_critic_only_imagination_moves_the_critic_and_leaves_the_actor():
     """`model.imagined_updates` "critic": the branched stage's updates train the critic, and
     the actor's parameters and optimiser moments stay as they were; "all" moves both."""
     moved = {}
     for updates in ("all", "critic"):
         trainer = Trainer(_config(model={"imagined_updates": updates}))
-        state = jax.tree.map(lambda x: x[0, 0], trainer.init_batch())
-        buffer = _buffer(
-            23, obs_size=4, action_size=2, capacity=trainer.config.model.buffer_capacity
-        )
-        state = state.replace(
-            buffer=buffer.replace(data=buffer.data.replace(obs=buffer.data.obs * 0.01))
-        )
-        _, real = jax.jit(trainer.real_stage)(state, jax.random.key(3))
-        after, _ = jax.jit(trainer.branch_stage)(state, jax.random.key(4), jnp.float32(1.0), real)
+        state, _, after = _stages(trainer)
         differ = lambda a, b: any(
             not np.array_equal(x, y)
             for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True)
@@ -241,15 +246,7 @@ def test_imagined_epochs_set_the_passes_over_imagined_rows_only():
     for epochs in (0, 3):
         config = _config(algo="ppo-model", model={"imagined_epochs": epochs})
         trainer = Trainer(config)
-        state = jax.tree.map(lambda x: x[0, 0], trainer.init_batch())
-        buffer = _buffer(
-            23, obs_size=4, action_size=2, capacity=trainer.config.model.buffer_capacity
-        )
-        state = state.replace(
-            buffer=buffer.replace(data=buffer.data.replace(obs=buffer.data.obs * 0.01))
-        )
-        real_state, real = jax.jit(trainer.real_stage)(state, jax.random.key(3))
-        after, _ = jax.jit(trainer.branch_stage)(state, jax.random.key(4), jnp.float32(1.0), real)
+        state, real_state, after = _stages(trainer)
         count = lambda s: max(
             int(x)
             for p, x in jax.tree_util.tree_leaves_with_path(s.learner.opt_state)
