@@ -5,6 +5,7 @@ import csv
 import dataclasses
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -17,6 +18,7 @@ import pytest
 from experiments.paper import figure5, report
 from experiments.paper import shadow as cal
 from ldn_jax.config import from_preset
+from ldn_jax.host.run_dir import RunDir
 from ldn_jax.learning_degree import ld_histogram
 from ldn_jax.trainer import Trainer
 
@@ -144,6 +146,24 @@ def _json(results: Path, name: str) -> dict:
     return json.loads((results / name / f"{name}.json").read_text())
 
 
+_SMOKE_RUNS = [
+    "cartpole-v0-a2c",
+    "cartpole-v0-a2c-model",
+    "cartpole-v0-ldn",
+    "cartpole-v0-ldn-ensemble",
+    "cartpole-v0-ldn-k0.5,1,2",
+    "inverted_pendulum-a2c",
+    "inverted_pendulum-a2c-model",
+    "inverted_pendulum-ldn",
+    "inverted_pendulum-ldn-k0.5,1,2",
+    "inverted_pendulum-ppo",
+    "inverted_pendulum-ppo-ldn",
+    "inverted_pendulum-ppo-model",
+    "stops-cartpole-v0-m2ac",
+    "stops-cartpole-v0-oracle",
+]
+
+
 def test_smoke_trains_each_run_once_and_reuses_it(smoke):
     results, stdout = smoke
     # Table 2's three runs, Figure 9's two (CartPole and inverted_pendulum), the calibration's
@@ -151,22 +171,45 @@ def test_smoke_trains_each_run_once_and_reuses_it(smoke):
     # Table 5's three and the targets' a2c; the other scripts reuse them.
     assert stdout.count("training ") == 14, stdout
     finished = sorted(p.name for p in (results / "runs" / "smoke").iterdir())
-    assert finished == [
-        "cartpole-v0-a2c",
-        "cartpole-v0-a2c-model",
-        "cartpole-v0-ldn",
-        "cartpole-v0-ldn-ensemble",
-        "cartpole-v0-ldn-k0.5,1,2",
-        "inverted_pendulum-a2c",
-        "inverted_pendulum-a2c-model",
-        "inverted_pendulum-ldn",
-        "inverted_pendulum-ldn-k0.5,1,2",
-        "inverted_pendulum-ppo",
-        "inverted_pendulum-ppo-ldn",
-        "inverted_pendulum-ppo-model",
-        "stops-cartpole-v0-m2ac",
-        "stops-cartpole-v0-oracle",
-    ]
+    assert finished == _SMOKE_RUNS
+
+
+def test_a_finished_mujoco_run_leaves_a_record_that_stands_in_for_its_directory(
+    smoke, tmp_path, monkeypatch
+):
+    from experiments.paper import common
+
+    results, _ = smoke
+    shutil.copytree(results / "runs" / "smoke", tmp_path / "runs" / "smoke")
+    shutil.copytree(results / "records" / "smoke", tmp_path / "records" / "smoke")
+    # MuJoCo runs only (CartPole's are minutes, and the calibration reads their checkpoints)
+    recorded = sorted(p.name for p in (tmp_path / "records" / "smoke").iterdir())
+    assert recorded == [n for n in _SMOKE_RUNS if n.startswith("inverted_pendulum")]
+    out = tmp_path / "runs" / "smoke" / "inverted_pendulum-a2c-model"
+    record = common.record_of(out)
+    assert record == tmp_path / "records" / "smoke" / "inverted_pendulum-a2c-model"
+    assert sorted(p.name for p in record.iterdir()) == sorted(common.RECORD_FILES)
+    config = RunDir(out).read_config()
+    summary, history = RunDir(out).read_summary(), common.load_history(out)
+    shutil.rmtree(out)  # a fresh clone: the record without the run
+    monkeypatch.setattr(common, "train", lambda *a, **k: pytest.fail("trained"))
+    assert common.ensure_run(config, out) == summary
+    kept = common.load_history(out)
+    assert kept.keys() == history.keys()
+    for name in history:
+        np.testing.assert_array_equal(kept[name], history[name])
+    # a record of another config is not reused: the run is trained
+    trained = []
+
+    def train(config, *args, **kwargs):
+        trained.append(config)
+        raise KeyboardInterrupt  # the test needs no more than the call
+
+    monkeypatch.setattr(common, "train", train)
+    other = dataclasses.replace(config, seeds=config.seeds + 1)
+    with pytest.raises(KeyboardInterrupt):
+        common.ensure_run(other, out)
+    assert trained == [other]
 
 
 def test_smoke_readings_and_stopping_rules(smoke):
@@ -483,6 +526,20 @@ def test_the_cpu_full_scale_runs_every_mujoco_table_at_1m_steps_with_5_seeds():
     assert common.run_dir(Path("r"), scale, cartpole) == common.run_dir(Path("r"), cpu, cartpole)
     hopper = common.run_config(scale, "hopper", "ppo")
     assert common.run_dir(Path("r"), scale, hopper) == Path("r/runs/cpu-full/hopper-ppo")
+    # Table 4's runs on the tasks whose default budget is 1M steps are the family study's
+    shared = {
+        (env, algo)
+        for env in common.MUJOCO
+        for algo in ("a2c-model", "ldn")
+        if common.run_dir(Path("r"), scale, config := common.run_config(scale, env, algo))
+        == Path(f"r/runs/family/{env}-{algo}-s5")
+        and config == common.family_config(env, algo, 5)
+    }
+    assert {env for env, _ in shared} == {"halfcheetah", "hopper", "walker2d", "ant"}
+    assert len(shared) == 8
+    pendulum = common.run_config(scale, "inverted_pendulum", "ldn")
+    own = Path("r/runs/cpu-full/inverted_pendulum-ldn")
+    assert common.run_dir(Path("r"), scale, pendulum) == own
     from experiments.paper import stops
 
     rule = stops.dir_of(Path("r"), scale, cartpole, "m2ac")  # the stopping-rule study's too

@@ -264,6 +264,20 @@ def run_config(scale: Scale, env: str, algo: str, k: tuple[float, ...] = (1.0,),
     return validate(config)
 
 
+FAMILY_ALGOS = ("a2c", "a2c-model", "ldn")
+"""The family study's algorithms (`experiments.paper.family`)."""
+
+
+def family_config(env: str, algo: str, seeds: int) -> Config:
+    """A run as `ldn-jax --env ENV --algo ALGO --seeds N --k 1` starts it: the default budget
+    and constants, K = 1 (the family study's runs; cpu-full's Table 4 shares them)."""
+    return validate(from_preset("paper", env=env, algo=algo, seeds=seeds, k=(1.0,)))
+
+
+def family_run_dir(results: Path, env: str, algo: str, seeds: int) -> Path:
+    return results / "runs" / "family" / f"{env}-{algo}-s{seeds}"
+
+
 def runs_of(results: Path, scale: Scale, env: str) -> Path:
     """Where a scale keeps its runs of `env`: under its name, but cpu-full's CartPole runs are
     the cpu scale's (the same configs, trained once for both)."""
@@ -272,6 +286,12 @@ def runs_of(results: Path, scale: Scale, env: str) -> Path:
 
 
 def run_dir(results: Path, scale: Scale, config: Config) -> Path:
+    """`runs_of`'s folder and a name from the algorithm, the LD reading and K. cpu-full's
+    MuJoCo runs that are the family study's (the same config: Table 4 on the four tasks
+    whose default budget is 1M steps and whose step limit is the paper's) are its runs."""
+    shared = scale.name == "cpu-full" and config.env in MUJOCO and config.algo in FAMILY_ALGOS
+    if shared and config == family_config(config.env, config.algo, config.seeds):
+        return family_run_dir(results, config.env, config.algo, config.seeds)
     name = f"{config.env}-{config.algo}"
     if config.model.ld != "m0":
         name += f"-{config.model.ld}"
@@ -282,15 +302,22 @@ def run_dir(results: Path, scale: Scale, config: Config) -> Path:
 
 def ensure_run(config: Config, out: Path) -> dict:
     """The summary of the run of `config` in `out`: reused if finished, resumed if it was
-    interrupted, trained from scratch otherwise (a run of another config there is replaced)."""
+    interrupted, trained from scratch otherwise (a run of another config there is replaced).
+    A MuJoCo run is also reused from its record (`record_of`) when its directory is gone, and
+    leaves one once finished."""
     run = RunDir(out)
     if run.holds_run():
         if _same_config(json.loads(run.config_file.read_text()), config):
             if run.is_finished():
+                _keep_record(config, out)
                 return run.read_summary()
             print(f"resuming {out}", flush=True)
-            return train(config, out, checkpoint_every=10, quiet=True, resume=True)
+            summary = train(config, out, checkpoint_every=10, quiet=True, resume=True)
+            _keep_record(config, out)
+            return summary
         shutil.rmtree(out)
+    elif (summary := _recorded_summary(config, out)) is not None:
+        return summary
     out.mkdir(parents=True, exist_ok=True)
     print(f"training {config.env} {config.algo} K={config.k} -> {out}", flush=True)
     summary = train(config, out, checkpoint_every=10, quiet=True)
@@ -298,7 +325,56 @@ def ensure_run(config: Config, out: Path) -> dict:
         f"  done: train {summary['train_seconds']:.0f}s, compile {summary['compile_seconds']:.0f}s",
         flush=True,
     )
+    _keep_record(config, out)
     return summary
+
+
+# A MuJoCo run at 1M steps costs minutes to an hour, and its directory (checkpoints, buffers)
+# does not belong in git: a finished one leaves a record, the few files the paper's scripts
+# read, that can be committed, so a long scale such as cpu-full accumulates over machines.
+RECORD_FILES = ("config.json", "history.npz", "summary.json")
+"""A record's files, written in this order (the summary last: a record counts once it is
+there)."""
+
+
+def record_of(out: Path) -> Path | None:
+    """Where the run in `DIR/runs/PATH` keeps its record: `DIR/records/PATH` (None for a
+    directory outside a `runs` folder)."""
+    for parent in out.parents:
+        if parent.name == "runs":
+            return parent.parent / "records" / out.relative_to(parent)
+    return None
+
+
+def _recorded_summary(config: Config, out: Path) -> dict | None:
+    """The summary kept in `out`'s record if that record is of `config`, else None."""
+    record = record_of(out)
+    if config.env not in MUJOCO or record is None or not (record / "summary.json").is_file():
+        return None
+    if not _same_config(json.loads((record / "config.json").read_text()), config):
+        return None
+    print(f"reusing the record {record}", flush=True)
+    return json.loads((record / "summary.json").read_text())
+
+
+def _keep_record(config: Config, out: Path) -> None:
+    """Write the finished MuJoCo run's record unless one of the same config is there."""
+    record = record_of(out)
+    if config.env not in MUJOCO or record is None:
+        return
+    done = (record / "summary.json").is_file() and _same_config(
+        json.loads((record / "config.json").read_text()), config
+    )
+    if done:
+        return
+    run = RunDir(out)
+    record.mkdir(parents=True, exist_ok=True)
+    (record / "summary.json").unlink(missing_ok=True)
+    shutil.copyfile(run.config_file, record / "config.json")
+    np.savez_compressed(record / "history.npz", **run.history())
+    temporary = record / "summary.json.tmp"
+    shutil.copyfile(run.summary_file, temporary)
+    temporary.replace(record / "summary.json")
 
 
 def _same_config(stored: dict, config: Config) -> bool:
@@ -353,7 +429,13 @@ def collect_runs(
 
 
 def load_history(out: Path) -> dict[str, np.ndarray]:
-    """The run's per-iteration metrics `{name: [K, S, N, ...]}`."""
+    """The run's per-iteration metrics `{name: [K, S, N, ...]}`, from its record when its
+    directory holds no finished run."""
+    record = record_of(out)
+    recorded = record is not None and (record / "summary.json").is_file()
+    if recorded and not RunDir(out).is_finished():
+        with np.load(record / "history.npz") as history:
+            return {name: history[name] for name in history.files}
     return RunDir(out).history()
 
 

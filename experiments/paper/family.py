@@ -26,17 +26,16 @@ from pathlib import Path
 import numpy as np
 
 from experiments.paper import common, locomotion, targets
-from ldn_jax.config import from_preset, validate
 from ldn_jax.host import stats
 
 ENVS = ("inverted_pendulum", "halfcheetah", "hopper", "walker2d", "ant", "reacher")
-ALGOS = ("a2c", "a2c-model", "ldn")
+ALGOS = common.FAMILY_ALGOS
 TITLE = "The A2C family at the default budgets"
 
 
 def config_of(env: str, algo: str, seeds: int):
     """K = 1 (the paper's MuJoCo runs'), as the targets' inverted_pendulum rows have it."""
-    return validate(from_preset("paper", env=env, algo=algo, seeds=seeds, k=(1.0,)))
+    return common.family_config(env, algo, seeds)
 
 
 def run_dir(results: Path, env: str, algo: str, seeds: int) -> Path:
@@ -44,7 +43,7 @@ def run_dir(results: Path, env: str, algo: str, seeds: int) -> Path:
     config = config_of(env, algo, seeds)
     if env == "inverted_pendulum" and seeds == 5:
         return targets.run_dir(results, common.SCALES["cpu"], config)
-    return results / "runs" / "family" / f"{env}-{algo}-s{seeds}"
+    return common.family_run_dir(results, env, algo, seeds)
 
 
 def row_of(env: str, algo: str, out: Path, summary: dict) -> dict:
