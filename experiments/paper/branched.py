@@ -117,6 +117,11 @@ RULES = {
         {"horizon": 5, "imagined_epochs": 5},
         "no rule, cut at 5 steps, 5 epochs on imagined rows",
     ),
+    "ld-epochs-10": (
+        "ppo-ldn",
+        {"horizon": 15, "imagined_epochs": 10},
+        "LD draw, disagreement, cap 15, 10 epochs on imagined rows",
+    ),
     "critic-5": (
         "ppo-model",
         {"horizon": 5, "imagined_updates": "critic"},
@@ -143,6 +148,7 @@ ONLY = {
     "ratio-8": ("halfcheetah",),
     "ld-ratio-8": ("halfcheetah",),
     "epochs-5": ("halfcheetah",),
+    "ld-epochs-10": ("halfcheetah",),
 }
 """Rules run on some envs only: inverted_pendulum's PPO has a state-dependent std
 (`std-real`), the pendulum is solved by every rule already, and the perfect-model bounds
