@@ -596,6 +596,16 @@ def test_the_branched_study_adds_seeds_to_a_finished_run_and_merges_their_rows(
         (0, 5, "hopper-ld-s5-100"), (5, 5, "hopper-ld-s5+5-100"), (10, 5, "hopper-ld-s10+5-100")
     ]  # fmt: skip
     assert dirs(2) == [(0, 2, "hopper-ld-s2-100")]
+    # on a fresh clone a finished run's record stands in for its directory
+    runs = tmp_path / "results" / "runs" / "branched"
+    record = tmp_path / "results" / "records" / "branched" / "hopper-m2ac-s5-100"
+    record.mkdir(parents=True)
+    whole = [(0, 10, runs / "hopper-m2ac-s10-100")]
+    assert branched.run_dirs(runs, "hopper", "m2ac", 10, 100) == whole  # not finished
+    (record / "summary.json").write_text("{}")
+    assert branched.run_dirs(runs, "hopper", "m2ac", 10, 100) == [
+        (0, 5, runs / "hopper-m2ac-s5-100"), (5, 5, runs / "hopper-m2ac-s5+5-100")
+    ]  # fmt: skip
     rows = [
         {"seeds": 5, "final_moving_return": [1.0] * 5, "eval_return": [2.0] * 5,
          "steps_to_solve": None, "imagined_per_real": 4.0, "train_seconds": 10.0},

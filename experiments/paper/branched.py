@@ -185,9 +185,13 @@ def run_dirs(runs: Path, env: str, rule: str, seeds: int, steps: int) -> list[tu
     def finished(pattern: str) -> list[tuple[int, Path]]:
         """(seeds, directory) of the finished runs `{env}-{rule}-s{pattern}{N}-{steps}`."""
         found = []
-        for path in runs.glob(f"{env}-{rule}-s{pattern}*-{steps}"):
+        name = f"{env}-{rule}-s{pattern}*-{steps}"
+        paths = {*runs.glob(name)}
+        if (records := common.record_of(runs)) is not None:  # runs whose directory is gone
+            paths |= {runs / record.name for record in records.glob(name)}
+        for path in sorted(paths):
             count = path.name.removeprefix(f"{env}-{rule}-s{pattern}").removesuffix(f"-{steps}")
-            if count.isdigit() and RunDir(path).is_finished():
+            if count.isdigit() and common.has_finished(path):
                 found.append((int(count), path))
         return found
 
@@ -399,9 +403,11 @@ def _cached(out: Path, runs: Path, args: argparse.Namespace) -> dict:
         if env not in envs or rule not in rules:
             continue
         dirs = run_dirs(runs, env, rule, len(row["eval_return"]), steps)
-        if all(RunDir(run).is_finished() for _, _, run in dirs):
+        summaries = [common.finished_summary(run) for _, _, run in dirs]
+        if None not in summaries:
             parts = [
-                results_of(env, rule, run, RunDir(run).read_summary(), steps) for _, _, run in dirs
+                results_of(env, rule, run, summary, steps)
+                for (_, _, run), summary in zip(dirs, summaries, strict=True)
             ]
             rows[env, rule] = merged(parts), row
     return rows

@@ -346,6 +346,26 @@ def record_of(out: Path) -> Path | None:
     return None
 
 
+def _recorded(out: Path) -> Path | None:
+    """`out`'s record if one is there (whatever its config)."""
+    record = record_of(out)
+    return record if record is not None and (record / "summary.json").is_file() else None
+
+
+def has_finished(out: Path) -> bool:
+    """A finished run is in `out`, or its record is there in its place."""
+    return RunDir(out).is_finished() or _recorded(out) is not None
+
+
+def finished_summary(out: Path) -> dict | None:
+    """The summary of the finished run in `out`, or of its record when the directory holds
+    none (whatever config either has); None if neither is there."""
+    if RunDir(out).is_finished():
+        return RunDir(out).read_summary()
+    record = _recorded(out)
+    return None if record is None else json.loads((record / "summary.json").read_text())
+
+
 def _recorded_summary(config: Config, out: Path) -> dict | None:
     """The summary kept in `out`'s record if that record is of `config`, else None."""
     record = record_of(out)
@@ -431,9 +451,8 @@ def collect_runs(
 def load_history(out: Path) -> dict[str, np.ndarray]:
     """The run's per-iteration metrics `{name: [K, S, N, ...]}`, from its record when its
     directory holds no finished run."""
-    record = record_of(out)
-    recorded = record is not None and (record / "summary.json").is_file()
-    if recorded and not RunDir(out).is_finished():
+    record = _recorded(out)
+    if record is not None and not RunDir(out).is_finished():
         with np.load(record / "history.npz") as history:
             return {name: history[name] for name in history.files}
     return RunDir(out).history()
