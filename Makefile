@@ -36,7 +36,8 @@ bench: $(STAMP)
 # The paper's results into experiments/results/ (REPORT.md there): CartPole, inverted_pendulum and a
 # short halfcheetah run on CPU; SCALE=cpu-full for every MuJoCo result at 1M env steps per
 # run (hours; cached and resumed), SCALE=paper for the paper's episode budgets (a GPU's).
-# Training runs are kept in experiments/results/runs/ and reused.
+# Training runs are kept in experiments/results/runs/ and reused; a finished MuJoCo run also
+# leaves a record in experiments/results/records/ (committed), reused where the run is gone.
 SCALE ?= cpu
 paper: $(STAMP)
 	$(PY) -m experiments.paper.all --scale $(SCALE)
