@@ -81,7 +81,10 @@ def section(rows: list[dict]) -> str:
         "cores; PPO's rows are in the locomotion study). IQM [95% bootstrap interval] over "
         "seeds; the greedy return is the trainer's own evaluation after training (10 "
         "episodes); imagined steps are per seed over the run (a model-based run that imagined "
-        "nothing learnt as A2C does). Curves: ![family](family/family.png)",
+        "nothing learnt as A2C does); wall s is the run's training and compile seconds as "
+        "the trainer measured them on a shared machine, an upper bound on its cost alone "
+        "(docs/tuning-mujoco.md says what ran beside each). Curves: "
+        "![family](family/family.png)",
         "",
         "| task | algorithm | real steps, mean | seeds | final moving return | per seed "
         "| greedy return | per seed | imagined steps | diverged | wall s |",
