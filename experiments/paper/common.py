@@ -368,8 +368,8 @@ def finished_summary(out: Path) -> dict | None:
 
 def _recorded_summary(config: Config, out: Path) -> dict | None:
     """The summary kept in `out`'s record if that record is of `config`, else None."""
-    record = record_of(out)
-    if config.env not in MUJOCO or record is None or not (record / "summary.json").is_file():
+    record = _recorded(out)
+    if config.env not in MUJOCO or record is None:
         return None
     if not _same_config(json.loads((record / "config.json").read_text()), config):
         return None
@@ -382,10 +382,7 @@ def _keep_record(config: Config, out: Path) -> None:
     record = record_of(out)
     if config.env not in MUJOCO or record is None:
         return
-    done = (record / "summary.json").is_file() and _same_config(
-        json.loads((record / "config.json").read_text()), config
-    )
-    if done:
+    if _recorded(out) and _same_config(json.loads((record / "config.json").read_text()), config):
         return
     run = RunDir(out)
     record.mkdir(parents=True, exist_ok=True)
