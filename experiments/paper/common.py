@@ -472,6 +472,21 @@ def env_steps_per_seed(out: Path) -> float:
     return float(load_history(out)["env_steps"][0, :, -1].mean())
 
 
+def run_fields(entry: dict) -> dict:
+    """What Tables 4 and 5 record of every finished MuJoCo run besides their own measures:
+    its budget, real episodes and steps per seed, greedy return and seconds."""
+    out, summary = entry["dir"], entry["summary"]
+    return {
+        "episodes": entry["config"].episodes,
+        "budget": budget_text(entry["config"]),
+        "episodes_per_seed": episodes_per_seed(out),
+        "eval_return": describe([r["eval_return"] for r in summary["runs"]]),
+        "env_steps_per_seed": env_steps_per_seed(out),
+        "train_seconds": summary["train_seconds"],
+        "compile_seconds": summary["compile_seconds"],
+    }
+
+
 def mujoco_curves(
     entries: list[dict], path: Path, title: str, levels: dict[str, float] | None = None
 ) -> None:

@@ -29,16 +29,7 @@ def rows(entries: list[dict]) -> list[dict]:
             runs = entry["summary"]["runs"]
             final = [r["final_moving_return"] for r in runs]
             row.update(common.describe(final))
-            row.update(
-                episodes=entry["config"].episodes,
-                budget=common.budget_text(entry["config"]),
-                episodes_per_seed=common.episodes_per_seed(entry["dir"]),
-                final_moving_returns=final,
-                eval_return=common.describe([r["eval_return"] for r in runs]),
-                env_steps_per_seed=common.env_steps_per_seed(entry["dir"]),
-                train_seconds=entry["summary"]["train_seconds"],
-                compile_seconds=entry["summary"]["compile_seconds"],
-            )
+            row.update(final_moving_returns=final, **common.run_fields(entry))
         else:
             row["reason"] = entry["reason"]
         out.append(row)

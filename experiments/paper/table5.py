@@ -78,15 +78,9 @@ def rows(entries: list[dict]) -> list[dict]:
                 top=top,
                 **common.describe(to_top),
                 episodes_to_top=to_top,
-                episodes=entry["config"].episodes,
-                budget=common.budget_text(entry["config"]),
-                episodes_per_seed=common.episodes_per_seed(entry["dir"]),
                 final_moving_return=common.describe([r["final_moving_return"] for r in runs]),
-                eval_return=common.describe([r["eval_return"] for r in runs]),
-                env_steps_per_seed=common.env_steps_per_seed(entry["dir"]),
                 **imagination(histories[env, algo]),
-                train_seconds=entry["summary"]["train_seconds"],
-                compile_seconds=entry["summary"]["compile_seconds"],
+                **common.run_fields(entry),
             )
         else:
             row["reason"] = entry["reason"]
