@@ -681,6 +681,33 @@ def test_the_branched_study_keeps_earlier_rows_and_names_each_envs_seeds(tmp_pat
     ) in text
 
 
+def test_the_branched_studys_targets_say_by_how_much_the_best_rule_misses_them():
+    from experiments.paper import branched
+
+    def row(rule, moving, greedy):
+        return {"env": "hopper", "rule": rule, "steps": 100, "name": branched.RULES[rule][2],
+                "final_moving_return": moving, "eval_return": greedy, "imagined_per_real": 0.0,
+                "steps_to_solve": None, "train_seconds": 1.0}  # fmt: skip
+
+    rows = [
+        row("ppo", [900.0] * 4, [1000.0] * 4),
+        row("cap-5", [1500.0] * 4, [2500.0] * 4),  # the best greedy: meets 2,000
+        row("ld", [1800.0] * 4, [800.0] * 4),  # the best moving: 200 short of 2,000
+        row("true-5", [5000.0] * 4, [5000.0] * 4),  # a bound, not a method: left out
+    ]
+    text = branched.section(rows)
+    assert (
+        "The branched preset's targets on hopper, over the best of its 2 model-based rules "
+        "(a maximum over rules, so an optimistic reading): final moving return >= 2,000: "
+        "missed by 200 (the best IQM, 1,800: LD draw, disagreement, cap 15); greedy return "
+        ">= 2,000: met (the best IQM, 2,500: no rule, cut at 5 steps); P(> PPO) above 0.75: "
+        "met (the highest, 1.00: no rule, cut at 5 steps)."
+    ) in text
+    assert "targets on inverted_pendulum" not in branched.section(
+        [{**r, "env": "inverted_pendulum"} for r in rows]
+    )
+
+
 def test_the_cached_branched_study_rereads_finished_rows_and_trains_nothing(tmp_path, monkeypatch):
     from experiments.paper import branched
 
