@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from experiments.paper import figure5, report
+from experiments.paper import cache, figure5, report
 from experiments.paper import shadow as cal
 from ldn_jax.config import from_preset
 from ldn_jax.host.run_dir import RunDir
@@ -177,7 +177,6 @@ def test_smoke_trains_each_run_once_and_reuses_it(smoke):
 def test_a_finished_mujoco_run_leaves_a_record_that_stands_in_for_its_directory(
     smoke, tmp_path, monkeypatch
 ):
-    from experiments.paper import common
 
     results, _ = smoke
     shutil.copytree(results / "runs" / "smoke", tmp_path / "runs" / "smoke")
@@ -186,15 +185,15 @@ def test_a_finished_mujoco_run_leaves_a_record_that_stands_in_for_its_directory(
     recorded = sorted(p.name for p in (tmp_path / "records" / "smoke").iterdir())
     assert recorded == [n for n in _SMOKE_RUNS if n.startswith("inverted_pendulum")]
     out = tmp_path / "runs" / "smoke" / "inverted_pendulum-a2c-model"
-    record = common.record_of(out)
+    record = cache.record_of(out)
     assert record == tmp_path / "records" / "smoke" / "inverted_pendulum-a2c-model"
-    assert sorted(p.name for p in record.iterdir()) == sorted(common.RECORD_FILES)
+    assert sorted(p.name for p in record.iterdir()) == sorted(cache.RECORD_FILES)
     config = RunDir(out).read_config()
-    summary, history = RunDir(out).read_summary(), common.load_history(out)
+    summary, history = RunDir(out).read_summary(), cache.load_history(out)
     shutil.rmtree(out)  # a fresh clone: the record without the run
-    monkeypatch.setattr(common, "train", lambda *a, **k: pytest.fail("trained"))
-    assert common.ensure_run(config, out) == summary
-    kept = common.load_history(out)
+    monkeypatch.setattr(cache, "train", lambda *a, **k: pytest.fail("trained"))
+    assert cache.ensure_run(config, out) == summary
+    kept = cache.load_history(out)
     assert kept.keys() == history.keys()
     for name in history:
         np.testing.assert_array_equal(kept[name], history[name])
@@ -205,10 +204,10 @@ def test_a_finished_mujoco_run_leaves_a_record_that_stands_in_for_its_directory(
         trained.append(config)
         raise KeyboardInterrupt  # the test needs no more than the call
 
-    monkeypatch.setattr(common, "train", train)
+    monkeypatch.setattr(cache, "train", train)
     other = dataclasses.replace(config, seeds=config.seeds + 1)
     with pytest.raises(KeyboardInterrupt):
-        common.ensure_run(other, out)
+        cache.ensure_run(other, out)
     assert trained == [other]
 
 
@@ -397,7 +396,7 @@ def test_cpu_scale_runs_every_mujoco_task_on_its_budget():
         [(unit, n)] = common.MUJOCO_CPU_BUDGETS[env].items()
         assert (config.steps if unit == "steps" else config.episodes) == n and config.seeds == 5
         assert config.steps is None or unit == "steps"
-        assert common.budget_text(config) == f"{n:,} {unit}"
+        assert cache.budget_text(config) == f"{n:,} {unit}"
 
 
 def test_the_halfcheetah_rules_take_their_own_budget_seeds_and_directories():
@@ -523,15 +522,15 @@ def test_the_cpu_full_scale_runs_every_mujoco_table_at_1m_steps_with_5_seeds():
     assert cartpole == common.run_config(common.SCALES["cpu"], "cartpole-v2", "ldn")
     # its CartPole runs are the cpu scale's, trained once; its MuJoCo runs its own
     cpu = common.SCALES["cpu"]
-    assert common.run_dir(Path("r"), scale, cartpole) == common.run_dir(Path("r"), cpu, cartpole)
+    assert cache.run_dir(Path("r"), scale, cartpole) == cache.run_dir(Path("r"), cpu, cartpole)
     hopper = common.run_config(scale, "hopper", "ppo")
-    assert common.run_dir(Path("r"), scale, hopper) == Path("r/runs/cpu-full/hopper-ppo")
+    assert cache.run_dir(Path("r"), scale, hopper) == Path("r/runs/cpu-full/hopper-ppo")
     # Table 4's runs on the tasks whose default budget is 1M steps are the family study's
     shared = {
         (env, algo)
         for env in common.MUJOCO
         for algo in ("a2c-model", "ldn")
-        if common.run_dir(Path("r"), scale, config := common.run_config(scale, env, algo))
+        if cache.run_dir(Path("r"), scale, config := common.run_config(scale, env, algo))
         == Path(f"r/runs/family/{env}-{algo}-s5")
         and config == common.family_config(env, algo, 5)
     }
@@ -539,7 +538,7 @@ def test_the_cpu_full_scale_runs_every_mujoco_table_at_1m_steps_with_5_seeds():
     assert len(shared) == 8
     pendulum = common.run_config(scale, "inverted_pendulum", "ldn")
     own = Path("r/runs/cpu-full/inverted_pendulum-ldn")
-    assert common.run_dir(Path("r"), scale, pendulum) == own
+    assert cache.run_dir(Path("r"), scale, pendulum) == own
     from experiments.paper import stops
 
     rule = stops.dir_of(Path("r"), scale, cartpole, "m2ac")  # the stopping-rule study's too
@@ -727,7 +726,7 @@ def test_the_cached_branched_study_rereads_finished_rows_and_trains_nothing(tmp_
                 "late_return": [7.0] * 5}  # fmt: skip
 
     monkeypatch.setattr(branched, "results_of", results_of)
-    monkeypatch.setattr(branched.common, "ensure_run", lambda *a: pytest.fail("trained"))
+    monkeypatch.setattr(branched.cache, "ensure_run", lambda *a: pytest.fail("trained"))
 
     def row(rule, seeds):
         return {"env": "hopper", "rule": rule, "steps": 100, "name": branched.RULES[rule][2],

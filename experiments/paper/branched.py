@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.paper import common
+from experiments.paper import cache, common
 from ldn_jax.config import from_preset, validate
 from ldn_jax.host import stats
 from ldn_jax.host.run_dir import RunDir
@@ -189,11 +189,11 @@ def run_dirs(runs: Path, env: str, rule: str, seeds: int, steps: int) -> list[tu
         found = []
         name = f"{env}-{rule}-s{pattern}*-{steps}"
         paths = {*runs.glob(name)}
-        if (records := common.record_of(runs)) is not None:  # runs whose directory is gone
+        if (records := cache.record_of(runs)) is not None:  # runs whose directory is gone
             paths |= {runs / record.name for record in records.glob(name)}
         for path in sorted(paths):
             count = path.name.removeprefix(f"{env}-{rule}-s{pattern}").removesuffix(f"-{steps}")
-            if count.isdigit() and common.has_finished(path):
+            if count.isdigit() and cache.has_finished(path):
                 found.append((int(count), path))
         return found
 
@@ -226,7 +226,7 @@ def merged(parts: list[dict]) -> dict:
 
 def results_of(env: str, rule: str, out: Path, summary: dict, steps: int) -> dict:
     runs = summary["runs"]
-    history = common.load_history(out)
+    history = cache.load_history(out)
     real = history["env_steps"][0, :, -1]
     imagined = history["imagined_steps"][0, :, -1]
     return {
@@ -457,7 +457,7 @@ def _cached(out: Path, runs: Path, args: argparse.Namespace) -> dict:
         if env not in envs or rule not in rules:
             continue
         dirs = run_dirs(runs, env, rule, len(row["eval_return"]), steps)
-        summaries = [common.finished_summary(run) for _, _, run in dirs]
+        summaries = [cache.finished_summary(run) for _, _, run in dirs]
         if None not in summaries:
             parts = [
                 results_of(env, rule, run, summary, steps)
@@ -545,7 +545,7 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             parts = []
             for first, seeds, run in run_dirs(runs, env, rule, args.seeds, steps):
-                summary = common.ensure_run(config_of(env, rule, seeds, steps, first), run)
+                summary = cache.ensure_run(config_of(env, rule, seeds, steps, first), run)
                 parts.append(results_of(env, rule, run, summary, steps))
             mine[env, rule] = merged(parts)
     # Read only now, so that rows another call wrote while these trained stay.

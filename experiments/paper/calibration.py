@@ -26,7 +26,7 @@ import jax
 import matplotlib.pyplot as plt
 import numpy as np
 
-from experiments.paper import common
+from experiments.paper import cache, common
 from experiments.paper import shadow as cal
 from ldn_jax.trainer import Trainer
 
@@ -111,7 +111,7 @@ def point_record(steps: cal.ShadowSteps, episodes: int, source: str, ensemble: d
 
 def training_row(config, run: Path, summary: dict) -> dict:
     """What one estimator does in training: episodes to threshold, LD, imagined steps."""
-    history = common.load_history(run)
+    history = cache.load_history(run)
     return {
         "ld": config.model.ld,
         "ensemble_members": config.model.ensemble if config.model.ld == "ensemble" else None,
@@ -168,14 +168,14 @@ def figure(points: list[dict], path: Path) -> None:
 def main(argv: list[str] | None = None) -> int:
     scale, results = common.parse_args(argv, __doc__)
     config = common.run_config(scale, scale.ld_env, ALGO)
-    run = common.run_dir(results, scale, config)
-    training = [training_row(config, run, common.ensure_run(config, run))]
+    run = cache.run_dir(results, scale, config)
+    training = [training_row(config, run, cache.ensure_run(config, run))]
     # The same run trained with the ensemble's learning degree (`--ld ensemble`).
     ensemble_config = common.run_config(scale, scale.ld_env, ALGO, ld="ensemble")
-    ensemble_run = common.run_dir(results, scale, ensemble_config)
-    summary = common.ensure_run(ensemble_config, ensemble_run)
+    ensemble_run = cache.run_dir(results, scale, ensemble_config)
+    summary = cache.ensure_run(ensemble_config, ensemble_run)
     training.append(training_row(ensemble_config, ensemble_run, summary))
-    reference = common.load_history(run)["moving_return"][0]  # [S, N]
+    reference = cache.load_history(run)["moving_return"][0]  # [S, N]
 
     trainer = Trainer(config)
     points = []

@@ -1,11 +1,8 @@
-"""What the paper scripts share: scales, the training runs they share, the paper's numbers,
-and result files.
+"""What the paper scripts share: scales, the configs of their runs, the paper's numbers,
+statistics and result files (the runs themselves: `experiments.paper.cache`).
 
 Every script takes `--scale cpu|cpu-full|paper` (default cpu), `--smoke` (a tiny budget, for
 tests) and `--results DIR` (default experiments/results), and writes into `DIR/<its name>/`.
-Training runs
-live under `DIR/runs/<scale>/` (not in git); a script that needs a run trains it, or reuses it
-when a finished run with the same config is there, or resumes it when one was interrupted.
 """
 
 from __future__ import annotations
@@ -16,18 +13,14 @@ import json
 import math
 import os
 import platform
-import shutil
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from ldn_jax import envs
 from ldn_jax.config import Config, from_preset, validate
 from ldn_jax.host import stats
-from ldn_jax.host.run_dir import RunDir
-from ldn_jax.host.training import train
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -274,219 +267,6 @@ def family_config(env: str, algo: str, seeds: int) -> Config:
     return validate(from_preset("paper", env=env, algo=algo, seeds=seeds, k=(1.0,)))
 
 
-def family_run_dir(results: Path, env: str, algo: str, seeds: int) -> Path:
-    return results / "runs" / "family" / f"{env}-{algo}-s{seeds}"
-
-
-def runs_of(results: Path, scale: Scale, env: str) -> Path:
-    """Where a scale keeps its runs of `env`: under its name, but cpu-full's CartPole runs are
-    the cpu scale's (the same configs, trained once for both)."""
-    shared = scale.name == "cpu-full" and env in CARTPOLE
-    return results / "runs" / ("cpu" if shared else scale.name)
-
-
-def run_dir(results: Path, scale: Scale, config: Config) -> Path:
-    """`runs_of`'s folder and a name from the algorithm, the LD reading and K. cpu-full's
-    MuJoCo runs that are the family study's (the same config: Table 4 on the four tasks
-    whose default budget is 1M steps and whose step limit is the paper's) are its runs."""
-    shared = scale.name == "cpu-full" and config.env in MUJOCO and config.algo in FAMILY_ALGOS
-    if shared and config == family_config(config.env, config.algo, config.seeds):
-        return family_run_dir(results, config.env, config.algo, config.seeds)
-    name = f"{config.env}-{config.algo}"
-    if config.model.ld != "m0":
-        name += f"-{config.model.ld}"
-    if len(config.k) > 1 or config.k != (1.0,):
-        name += "-k" + ",".join(f"{k:g}" for k in config.k)
-    return runs_of(results, scale, config.env) / name
-
-
-def ensure_run(config: Config, out: Path) -> dict:
-    """The summary of the run of `config` in `out`: reused if finished, resumed if it was
-    interrupted, trained from scratch otherwise (a run of another config there is replaced).
-    A MuJoCo run is also reused from its record (`record_of`) when its directory is gone, and
-    leaves one once finished."""
-    run = RunDir(out)
-    if run.holds_run():
-        if _same_config(json.loads(run.config_file.read_text()), config):
-            if run.is_finished():
-                _keep_record(config, out)
-                return run.read_summary()
-            print(f"resuming {out}", flush=True)
-            summary = train(config, out, checkpoint_every=10, quiet=True, resume=True)
-            _keep_record(config, out)
-            return summary
-        shutil.rmtree(out)
-    elif (summary := _recorded_summary(config, out)) is not None:
-        return summary
-    out.mkdir(parents=True, exist_ok=True)
-    print(f"training {config.env} {config.algo} K={config.k} -> {out}", flush=True)
-    summary = train(config, out, checkpoint_every=10, quiet=True)
-    print(
-        f"  done: train {summary['train_seconds']:.0f}s, compile {summary['compile_seconds']:.0f}s",
-        flush=True,
-    )
-    _keep_record(config, out)
-    return summary
-
-
-# A MuJoCo run at 1M steps costs minutes to an hour, and its directory (checkpoints, buffers)
-# does not belong in git: a finished one leaves a record, the few files the paper's scripts
-# read, that can be committed, so a long scale such as cpu-full accumulates over machines.
-RECORD_FILES = ("config.json", "history.npz", "summary.json")
-"""A record's files, written in this order (the summary last: a record counts once it is
-there)."""
-
-
-def record_of(out: Path) -> Path | None:
-    """Where the run in `DIR/runs/PATH` keeps its record: `DIR/records/PATH` (None for a
-    directory outside a `runs` folder)."""
-    for parent in out.parents:
-        if parent.name == "runs":
-            return parent.parent / "records" / out.relative_to(parent)
-    return None
-
-
-def _recorded(out: Path) -> Path | None:
-    """`out`'s record if one is there (whatever its config)."""
-    record = record_of(out)
-    return record if record is not None and (record / "summary.json").is_file() else None
-
-
-def has_finished(out: Path) -> bool:
-    """A finished run is in `out`, or its record is there in its place."""
-    return RunDir(out).is_finished() or _recorded(out) is not None
-
-
-def finished_summary(out: Path) -> dict | None:
-    """The summary of the finished run in `out`, or of its record when the directory holds
-    none (whatever config either has); None if neither is there."""
-    if RunDir(out).is_finished():
-        return RunDir(out).read_summary()
-    record = _recorded(out)
-    return None if record is None else json.loads((record / "summary.json").read_text())
-
-
-def _recorded_summary(config: Config, out: Path) -> dict | None:
-    """The summary kept in `out`'s record if that record is of `config`, else None."""
-    record = _recorded(out)
-    if config.env not in MUJOCO or record is None:
-        return None
-    if not _same_config(json.loads((record / "config.json").read_text()), config):
-        return None
-    print(f"reusing the record {record}", flush=True)
-    return json.loads((record / "summary.json").read_text())
-
-
-def _keep_record(config: Config, out: Path) -> None:
-    """Write the finished MuJoCo run's record unless one of the same config is there."""
-    record = record_of(out)
-    if config.env not in MUJOCO or record is None:
-        return
-    if _recorded(out) and _same_config(json.loads((record / "config.json").read_text()), config):
-        return
-    run = RunDir(out)
-    record.mkdir(parents=True, exist_ok=True)
-    (record / "summary.json").unlink(missing_ok=True)
-    shutil.copyfile(run.config_file, record / "config.json")
-    np.savez_compressed(record / "history.npz", **run.history())
-    temporary = record / "summary.json.tmp"
-    shutil.copyfile(run.summary_file, temporary)
-    temporary.replace(record / "summary.json")
-
-
-def _same_config(stored: dict, config: Config) -> bool:
-    """Whether a run directory's config.json is `config`: the same run format and the same
-    settings once read back, so that a setting added later with its default still matches."""
-    if not RunDir.same_format(stored):
-        return False
-    try:
-        plain = lambda c: _resolved(json.loads(json.dumps(c.to_dict())))
-        return plain(Config.from_dict(stored)) == plain(config)
-    except TypeError:  # a field this version does not know
-        return False
-
-
-def _resolved(config: dict) -> dict:
-    """A MuJoCo config's `backend: auto` as the engine it picks here (the CLI records that
-    engine, a script's config says "auto": the same run)."""
-    if config.get("backend") == "auto" and config.get("env") in envs.mujoco.TASKS:
-        return {**config, "backend": envs.mujoco.resolve_backend("auto")}
-    return config
-
-
-def collect_runs(
-    envs: tuple[str, ...], algos: tuple[str, ...], scale: Scale, results: Path, k=(1.0,)
-) -> list[dict]:
-    """Ensure the run of every env x algo; one entry each, in order: `{env, algo, status:
-    "done", dir, config, summary}`, or `{env, algo, status: "pending", reason}` for a run this
-    scale does not do (`run_config`)."""
-    entries = []
-    for env in envs:
-        for algo in algos:
-            try:
-                config = run_config(scale, env, algo, k)
-            except ValueError as error:
-                entries.append(
-                    {"env": env, "algo": algo, "status": "pending", "reason": str(error)}
-                )
-                continue
-            out = run_dir(results, scale, config)
-            summary = ensure_run(config, out)
-            entries.append(
-                {
-                    "env": env,
-                    "algo": algo,
-                    "status": "done",
-                    "dir": out,
-                    "config": config,
-                    "summary": summary,
-                }
-            )
-    return entries
-
-
-def load_history(out: Path) -> dict[str, np.ndarray]:
-    """The run's per-iteration metrics `{name: [K, S, N, ...]}`, from its record when its
-    directory holds no finished run."""
-    record = _recorded(out)
-    if record is not None and not RunDir(out).is_finished():
-        with np.load(record / "history.npz") as history:
-            return {name: history[name] for name in history.files}
-    return RunDir(out).history()
-
-
-def budget_text(config: Config) -> str:
-    """A run's budget per seed, as its config states it: "600,000 steps" or "8 episodes"."""
-    if config.steps is not None:
-        return f"{config.steps:,} steps"
-    return f"{config.episodes:,} episodes"
-
-
-def episodes_per_seed(out: Path) -> float:
-    """Mean real episodes per seed (K = 1) over the whole run."""
-    return float(load_history(out)["episodes"][0, :, -1].mean())
-
-
-def env_steps_per_seed(out: Path) -> float:
-    """Mean real env steps per seed (K = 1) over the whole run."""
-    return float(load_history(out)["env_steps"][0, :, -1].mean())
-
-
-def run_fields(entry: dict) -> dict:
-    """What Tables 4 and 5 record of every finished MuJoCo run besides their own measures:
-    its budget, real episodes and steps per seed, greedy return and seconds."""
-    out, summary = entry["dir"], entry["summary"]
-    return {
-        "episodes": entry["config"].episodes,
-        "budget": budget_text(entry["config"]),
-        "episodes_per_seed": episodes_per_seed(out),
-        "eval_return": describe([r["eval_return"] for r in summary["runs"]]),
-        "env_steps_per_seed": env_steps_per_seed(out),
-        "train_seconds": summary["train_seconds"],
-        "compile_seconds": summary["compile_seconds"],
-    }
-
-
 def mujoco_curves(
     entries: list[dict], path: Path, title: str, levels: dict[str, float] | None = None
 ) -> None:
@@ -495,6 +275,7 @@ def mujoco_curves(
     run finished."""
     import matplotlib.pyplot as plt
 
+    from experiments.paper.cache import load_history
     from ldn_jax.host.plots import band_panel
 
     done: dict[str, list[dict]] = {}

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.paper import common, locomotion, targets
+from experiments.paper import cache, common, locomotion, targets
 from ldn_jax.host import stats
 
 ENVS = ("inverted_pendulum", "halfcheetah", "hopper", "walker2d", "ant", "reacher")
@@ -43,12 +43,12 @@ def run_dir(results: Path, env: str, algo: str, seeds: int) -> Path:
     config = config_of(env, algo, seeds)
     if env == "inverted_pendulum" and seeds == 5:
         return targets.run_dir(results, common.SCALES["cpu"], config)
-    return common.family_run_dir(results, env, algo, seeds)
+    return cache.family_run_dir(results, env, algo, seeds)
 
 
 def row_of(env: str, algo: str, out: Path, summary: dict) -> dict:
     runs = summary["runs"]
-    history = common.load_history(out)
+    history = cache.load_history(out)
     imagined = history["imagined_steps"][0, :, -1] if algo != "a2c" else None
     return {
         "env": env,
@@ -168,7 +168,7 @@ def main(argv: list[str] | None = None) -> int:
     for env in envs:
         for algo in algos:  # the files after each run, so a stopped study keeps what it finished
             run = run_dir(args.results, env, algo, args.seeds)
-            summary = common.ensure_run(config_of(env, algo, args.seeds), run)
+            summary = cache.ensure_run(config_of(env, algo, args.seeds), run)
             rows[env, algo] = row_of(env, algo, run, summary)
             ordered = [rows[e, a] for e in ENVS for a in ALGOS if (e, a) in rows]
             (out / "family.md").write_text(section(ordered))

@@ -15,7 +15,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from experiments.paper import common, table2
+from experiments.paper import cache, common, table2
 from ldn_jax.host.metrics import mean_band
 from ldn_jax.host.plots import band_panel
 
@@ -28,7 +28,7 @@ def curves(entries: list[dict]) -> dict[str, dict[str, tuple[np.ndarray, np.ndar
     out: dict[str, dict] = {}
     for entry in entries:
         if entry["status"] == "done":
-            history = common.load_history(entry["dir"])
+            history = cache.load_history(entry["dir"])
             episodes = history["episodes"][0, 0]
             out.setdefault(entry["env"], {})[entry["algo"]] = (
                 episodes,

@@ -22,7 +22,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from experiments.paper import common
+from experiments.paper import cache, common
 from ldn_jax.learning_degree import LD_BINS
 
 STEP_BIN = 500
@@ -145,8 +145,8 @@ def figure(data: dict, env: str, path: Path) -> None:
 def main(argv: list[str] | None = None) -> int:
     scale, results = common.parse_args(argv, __doc__)
     data = {}
-    for entry in common.collect_runs((scale.ld_env,), ALGOS, scale, results):
-        data[entry["algo"]] = histograms(common.load_history(entry["dir"]))
+    for entry in cache.collect_runs((scale.ld_env,), ALGOS, scale, results):
+        data[entry["algo"]] = histograms(cache.load_history(entry["dir"]))
     out = common.out_dir(results, "figure5")
     record = {
         **common.scale_record(scale),

@@ -17,7 +17,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from experiments.paper import common
+from experiments.paper import cache, common
 from ldn_jax.host.plots import band_panel
 
 K_VALUES = (0.5, 1.0, 2.0)
@@ -26,7 +26,7 @@ LISTS = ("k", "final_moving_return", "episodes_to_threshold", "final_moving_retu
 
 
 def rows(entry: dict) -> list[dict]:
-    history = common.load_history(entry["dir"])
+    history = cache.load_history(entry["dir"])
     out = []
     for ki, k in enumerate(entry["config"].k):
         runs = [r for r in entry["summary"]["runs"] if r["k"] == k]
@@ -53,7 +53,7 @@ def panel(entry: dict) -> dict:
         "seeds": entry["config"].seeds,
         "episodes": entry["config"].episodes,
         "steps": entry["config"].steps,
-        "budget": common.budget_text(entry["config"]),
+        "budget": cache.budget_text(entry["config"]),
         "train_seconds": entry["summary"]["train_seconds"],
         "compile_seconds": entry["summary"]["compile_seconds"],
         "threshold": entry["summary"]["threshold"],
@@ -64,7 +64,7 @@ def panel(entry: dict) -> dict:
 def figure(entries: list[dict], panels: list[dict], path: Path) -> None:
     fig, axes = plt.subplots(len(panels), 2, figsize=(11, 4 * len(panels)), dpi=120, squeeze=False)
     for (left, right), entry, data in zip(axes, entries, panels, strict=True):
-        history = common.load_history(entry["dir"])
+        history = cache.load_history(entry["dir"])
         episodes = history["episodes"][0, 0]
         threshold = data["threshold"]
         curves = {
@@ -96,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     scale, results = common.parse_args(argv, __doc__)
     entries = []
     for env in (scale.ld_env, *scale.ablation_envs):
-        entries += common.collect_runs((env,), ("ldn",), scale, results, k=K_VALUES)
+        entries += cache.collect_runs((env,), ("ldn",), scale, results, k=K_VALUES)
     done = [e for e in entries if e["status"] == "done"]
     panels = [panel(e) for e in done]
     pending = [{"env": e["env"], "reason": e["reason"]} for e in entries if e not in done]

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.paper import common
+from experiments.paper import cache, common
 from ldn_jax.config import from_preset, validate
 from ldn_jax.host import stats
 
@@ -47,7 +47,7 @@ def config_of(env: str, seeds: int):
 
 def row_of(env: str, out: Path, summary: dict) -> dict:
     runs = summary["runs"]
-    history = common.load_history(out)
+    history = cache.load_history(out)
     evals = [r["eval_return"] for r in runs]
     greedy = stats.estimate(evals)
     return {
@@ -167,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
     rows = {r["env"]: r for r in json.loads(record.read_text())["rows"]} if record.exists() else {}
     for env in envs:  # the files after each task, so a stopped study keeps what it finished
         run = run_dir(args.results, env, args.seeds)
-        summary = common.ensure_run(config_of(env, args.seeds), run)
+        summary = cache.ensure_run(config_of(env, args.seeds), run)
         rows[env] = row_of(env, run, summary)
         _write(out, record, [rows[env] for env in ZOO if env in rows], args.results)
     print(f"wrote {out}/locomotion.json, locomotion.md and locomotion.png")
@@ -178,7 +178,7 @@ def _write(out: Path, record: Path, rows: list[dict], results: Path) -> None:
     for row in rows:  # a row recorded before rows kept their curve: from its run, if at hand
         run = run_dir(results, row["env"], row["seeds"])
         if "curve" not in row and (run / "summary.json").exists():
-            row["curve"] = kept_curve(common.load_history(run))
+            row["curve"] = kept_curve(cache.load_history(run))
     (out / "locomotion.md").write_text(section(rows))
     common.write_json(record, {"machine": common.machine(), "rows": rows})
     curves(rows, out / "locomotion.png")

@@ -39,7 +39,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from scipy import stats as scipy_stats
 
-from experiments.paper import common, figure5
+from experiments.paper import cache, common, figure5
 from ldn_jax.config import Config, validate
 from ldn_jax.host import stats
 from ldn_jax.host.metrics import run_crossing
@@ -127,7 +127,7 @@ def dir_of(results: Path, scale: common.Scale, config: Config, name: str) -> Pat
     """The Table 2 run's directory where the config is one (the literal reading, the
     ensemble and A3C-Model), else `stops-ENV-NAME` (every MuJoCo rule where `RULE_SEEDS`
     exceeds the scale's MuJoCo seeds: the tables' runs keep theirs)."""
-    plain = common.run_dir(results, scale, config)
+    plain = cache.run_dir(results, scale, config)
     own_budget = config.steps != scale.mujoco_budgets.get(config.env, {}).get("steps")
     if config.env in common.MUJOCO and (config.seeds != scale.mujoco_seeds or own_budget):
         return results / "runs" / scale.name / f"stops-{config.env}-{name}"
@@ -136,7 +136,7 @@ def dir_of(results: Path, scale: common.Scale, config: Config, name: str) -> Pat
     if name == "ld-ensemble":
         return plain
     name = {"ld-fig5": "batch"}.get(name, name)  # one run, both studies
-    return common.runs_of(results, scale, config.env) / f"stops-{config.env}-{name}"
+    return cache.runs_of(results, scale, config.env) / f"stops-{config.env}-{name}"
 
 
 def ensure(results, scale, env, name, algo, model, sweep=()) -> dict | None:
@@ -152,14 +152,14 @@ def ensure(results, scale, env, name, algo, model, sweep=()) -> dict | None:
         print(f"  {env} {name}: not run ({error})", flush=True)
         return None
     out = dir_of(results, scale, config, name)
-    return {"config": config, "dir": out, "summary": common.ensure_run(config, out)}
+    return {"config": config, "dir": out, "summary": cache.ensure_run(config, out)}
 
 
 def _points(entry: dict) -> list[dict]:
     """One record per point of a study run: its label, the seeds' per-run values and the
     run's history at that point."""
     config, summary = entry["config"], entry["summary"]
-    history = common.load_history(entry["dir"])
+    history = cache.load_history(entry["dir"])
     budget = config.episodes if config.steps is None else config.steps
     unit = "episodes" if config.steps is None else "env_steps"
     out = []

@@ -15,14 +15,14 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from experiments.paper import common
+from experiments.paper import cache, common
 
 ALGOS = ("a2c", "a2c-model", "ldn")
 
 
 def runs(scale: common.Scale, results: Path) -> list[dict]:
     """The runs of Tables 2 and 3 and Figure 4 (trained once, reused by the three scripts)."""
-    return common.collect_runs(scale.cartpole_envs, ALGOS, scale, results)
+    return cache.collect_runs(scale.cartpole_envs, ALGOS, scale, results)
 
 
 def rows(entries: list[dict]) -> list[dict]:

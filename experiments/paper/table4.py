@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import sys
 
-from experiments.paper import common
+from experiments.paper import cache, common
 
 ENVS = ("ant", "halfcheetah", "hopper", "reacher", "walker2d", "inverted_pendulum")
 ALGOS = ("a2c-model", "ldn")
@@ -29,7 +29,7 @@ def rows(entries: list[dict]) -> list[dict]:
             runs = entry["summary"]["runs"]
             final = [r["final_moving_return"] for r in runs]
             row.update(common.describe(final))
-            row.update(final_moving_returns=final, **common.run_fields(entry))
+            row.update(final_moving_returns=final, **cache.run_fields(entry))
         else:
             row["reason"] = entry["reason"]
         out.append(row)
@@ -38,7 +38,7 @@ def rows(entries: list[dict]) -> list[dict]:
 
 def main(argv: list[str] | None = None) -> int:
     scale, results = common.parse_args(argv, __doc__)
-    entries = common.collect_runs(ENVS, ALGOS, scale, results)
+    entries = cache.collect_runs(ENVS, ALGOS, scale, results)
     table = rows(entries)
     out = common.out_dir(results, "table4")
     record = {

@@ -16,7 +16,7 @@ import sys
 
 import numpy as np
 
-from experiments.paper import common
+from experiments.paper import cache, common
 from ldn_jax.host.metrics import run_crossing
 
 ENVS = ("inverted_pendulum", "halfcheetah", "hopper")
@@ -57,7 +57,7 @@ def imagination(history: dict[str, np.ndarray]) -> dict:
 
 def rows(entries: list[dict]) -> list[dict]:
     histories = {
-        (e["env"], e["algo"]): common.load_history(e["dir"])
+        (e["env"], e["algo"]): cache.load_history(e["dir"])
         for e in entries
         if e["status"] == "done"
     }
@@ -80,7 +80,7 @@ def rows(entries: list[dict]) -> list[dict]:
                 episodes_to_top=to_top,
                 final_moving_return=common.describe([r["final_moving_return"] for r in runs]),
                 **imagination(histories[env, algo]),
-                **common.run_fields(entry),
+                **cache.run_fields(entry),
             )
         else:
             row["reason"] = entry["reason"]
@@ -90,7 +90,7 @@ def rows(entries: list[dict]) -> list[dict]:
 
 def main(argv: list[str] | None = None) -> int:
     scale, results = common.parse_args(argv, __doc__)
-    entries = common.collect_runs(
+    entries = cache.collect_runs(
         tuple(e for e in ENVS if e in scale.learning_envs), ALGOS, scale, results
     )
     entries += [

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.paper import common, locomotion
+from experiments.paper import cache, common, locomotion
 from ldn_jax.config import from_preset, validate
 from ldn_jax.host.metrics import run_crossing
 
@@ -67,15 +67,15 @@ def run_dir(results: Path, scale: common.Scale, config) -> Path:
     budgets do not depend on the scale: every scale but smoke keeps them in the cpu scale's
     folder."""
     if scale.name == "smoke":
-        return common.run_dir(results, scale, config)
+        return cache.run_dir(results, scale, config)
     if config.algo == "ppo" and config.env in locomotion.ZOO:
         return locomotion.run_dir(results, config.env, config.seeds)
-    out = common.run_dir(results, common.SCALES["cpu"], config)
+    out = cache.run_dir(results, common.SCALES["cpu"], config)
     return out.with_name("targets-" + out.name)
 
 
 def pendulum_row(entry: dict) -> dict:
-    history = common.load_history(entry["dir"])
+    history = cache.load_history(entry["dir"])
     summary = entry["summary"]
     after = history["moving_after"][0]  # [S, N, W]: after each episode, in completion order
     reach = []
@@ -89,7 +89,7 @@ def pendulum_row(entry: dict) -> dict:
         "env": entry["env"],
         "algo": entry["algo"],
         "status": "done",
-        "budget": common.budget_text(entry["config"]),
+        "budget": cache.budget_text(entry["config"]),
         "seeds": len(reach),
         "reached": reached,
         "steps_to_level": reach,
@@ -103,7 +103,7 @@ def pendulum_row(entry: dict) -> dict:
 
 
 def cheetah_row(entry: dict) -> dict:
-    history = common.load_history(entry["dir"])
+    history = cache.load_history(entry["dir"])
     summary = entry["summary"]
     moving = history["moving_return"]  # [K, S, N]
     mean = np.nanmean(moving.reshape(-1, moving.shape[-1]), axis=0)
@@ -113,7 +113,7 @@ def cheetah_row(entry: dict) -> dict:
         "env": entry["env"],
         "algo": entry["algo"],
         "status": "done",
-        "budget": common.budget_text(entry["config"]),
+        "budget": cache.budget_text(entry["config"]),
         "seeds": entry["config"].seeds,
         "k": list(entry["config"].k),
         "first_mean_moving_return": float(mean[0]),
@@ -147,7 +147,7 @@ def curves(entries: list[dict], path: Path) -> None:
     rows = -(-len(done) // cols)
     fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.4 * rows), dpi=110, squeeze=False)
     for ax, entry in zip(axes.flat, done, strict=False):
-        history = common.load_history(entry["dir"])
+        history = cache.load_history(entry["dir"])
         moving = history["moving_return"]
         steps = history["env_steps"].reshape(-1, moving.shape[-1]).mean(axis=0)
         label = common.PAPER_ALGOS.get(entry["algo"], entry["algo"])
@@ -237,7 +237,7 @@ def main(argv: list[str] | None = None) -> int:
             continue
         run = run_dir(results, scale, config)
         entry = {"env": env, "algo": algo, "status": "done", "dir": run, "config": config}
-        entry["summary"] = common.ensure_run(config, run)
+        entry["summary"] = cache.ensure_run(config, run)
         entries.append(entry)
         row = pendulum_row(entry) if env == "inverted_pendulum" else cheetah_row(entry)
         table.append({"date": _finished(run), **row})
