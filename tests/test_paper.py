@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from experiments.paper import cache, figure5, report
+from experiments.paper import branched, branched_rules, cache, figure5, report, report_branched
 from experiments.paper import shadow as cal
 from ldn_jax.config import from_preset
 from ldn_jax.host.run_dir import RunDir
@@ -574,7 +574,6 @@ def test_the_locomotion_study_states_each_tasks_ratio_to_the_zoo(tmp_path):
 def test_the_branched_study_adds_seeds_to_a_finished_run_and_merges_their_rows(
     tmp_path, monkeypatch
 ):
-    from experiments.paper import branched
 
     finished = ("hopper-ld-s3-100", "hopper-ld-s5-100", "hopper-ld-s5+5-100")
     for name in (*finished, "hopper-ld-s8-100", "hopper-ld-variance-s9-100"):
@@ -614,11 +613,10 @@ def test_the_branched_study_adds_seeds_to_a_finished_run_and_merges_their_rows(
     row = branched.merged(rows)
     assert row["final_moving_return"] == [1.0] * 5 + [3.0] * 3 and row["eval_return"][-1] == 4.0
     assert (row["seeds"], row["imagined_per_real"], row["train_seconds"]) == (8, 2.5, 15.0)
-    assert branched.config_of("hopper", "ld", 5, 100, first_seed=5).first_seed == 5
+    assert branched_rules.config_of("hopper", "ld", 5, 100, first_seed=5).first_seed == 5
 
 
 def test_the_late_training_return_reads_the_last_tenth_of_the_budget():
-    from experiments.paper import branched
 
     # Two seeds, three iterations of two episode slots each (budget 1,000): the episodes
     # that ended past 900 steps count, each once; seed 1 ended none there.
@@ -642,9 +640,9 @@ def test_the_late_training_return_reads_the_last_tenth_of_the_budget():
     assert branched.late_returns(history, 1000) == [4.25, 0.0]  # (2 + 3 + 4 + 8) / 4
     with pytest.raises(ValueError, match="one K"):
         branched.late_returns({**history, "env_steps": np.repeat(env_steps, 2, 0)}, 1000)
-    assert branched._late_text({"late_return": None}) == "–"
-    assert branched._late_text({"late_return": [None, None]}) == "–"
-    assert branched._late_text({"late_return": [2.0, None, 2.0]}) == "2 [2, 2]"
+    assert report_branched._late_text({"late_return": None}) == "–"
+    assert report_branched._late_text({"late_return": [None, None]}) == "–"
+    assert report_branched._late_text({"late_return": [2.0, None, 2.0]}) == "2 [2, 2]"
     parts = [{"late_return": [1.0]}, {"late_return": None}]
     rows = [{**p, "seeds": 1, "imagined_per_real": 0.0, "train_seconds": 1.0,
              "final_moving_return": [0.0], "eval_return": [0.0], "steps_to_solve": None}
@@ -653,10 +651,9 @@ def test_the_late_training_return_reads_the_last_tenth_of_the_budget():
 
 
 def test_the_branched_study_keeps_earlier_rows_and_names_each_envs_seeds(tmp_path):
-    from experiments.paper import branched
 
     def row(env, rule, seeds, value):
-        return {"env": env, "rule": rule, "steps": 100, "name": branched.RULES[rule][2],
+        return {"env": env, "rule": rule, "steps": 100, "name": branched_rules.RULES[rule][2],
                 "final_moving_return": [value] * seeds, "eval_return": [value] * seeds,
                 "imagined_per_real": 0.0, "steps_to_solve": None, "train_seconds": 1.0}  # fmt: skip
 
@@ -664,16 +661,16 @@ def test_the_branched_study_keeps_earlier_rows_and_names_each_envs_seeds(tmp_pat
     (tmp_path / "b.json").write_text(json.dumps({"rows": rows}))
     earlier = branched._earlier(tmp_path / "b.json")
     assert [(r["env"], r["rule"]) for r in earlier] == [("hopper", "ppo"), ("hopper", "cap-5")]
-    text = branched.section(earlier)
+    text = report_branched.section(earlier)
     assert "### hopper, 100 steps, 3 seeds" in text
     assert "| training return, last 10% of steps |" in text and "| 3 | 10 [10, 10] | – |" in text
-    text = branched.section([*earlier, row("hopper", "mbpo", 5, 40.0)])
+    text = report_branched.section([*earlier, row("hopper", "mbpo", 5, 40.0)])
     assert "### hopper, 100 steps, 3-5 seeds" in text
     assert "no rule, cut at 5 steps: beats PPO (P 1.00)" in text
     assert "LD draw against" not in text  # no LD row, no question asked
     # The study's question: the LD draw against the field's rules and the best fixed cap.
     rows = [*earlier, row("hopper", "ld", 3, 30.0), row("hopper", "mbpo", 3, 40.0)]
-    text = branched.section(rows)
+    text = report_branched.section(rows)
     assert (
         "The LD draw against the other rules on hopper, P(better): MBPO's horizon schedule, "
         "1 to 15 0.00 [0.00, 0.00]; no rule, cut at 5 steps 1.00 [1.00, 1.00]"
@@ -681,10 +678,9 @@ def test_the_branched_study_keeps_earlier_rows_and_names_each_envs_seeds(tmp_pat
 
 
 def test_the_branched_studys_targets_say_by_how_much_the_best_rule_misses_them():
-    from experiments.paper import branched
 
     def row(rule, moving, greedy):
-        return {"env": "hopper", "rule": rule, "steps": 100, "name": branched.RULES[rule][2],
+        return {"env": "hopper", "rule": rule, "steps": 100, "name": branched_rules.RULES[rule][2],
                 "final_moving_return": moving, "eval_return": greedy, "imagined_per_real": 0.0,
                 "steps_to_solve": None, "train_seconds": 1.0}  # fmt: skip
 
@@ -694,7 +690,7 @@ def test_the_branched_studys_targets_say_by_how_much_the_best_rule_misses_them()
         row("ld", [1800.0] * 4, [800.0] * 4),  # the best moving: 200 short of 2,000
         row("true-5", [5000.0] * 4, [5000.0] * 4),  # a bound, not a method: left out
     ]
-    text = branched.section(rows)
+    text = report_branched.section(rows)
     assert (
         "The branched preset's targets on hopper, over the best of its 2 model-based rules "
         "(a maximum over rules, so an optimistic reading): final moving return >= 2,000: "
@@ -702,13 +698,12 @@ def test_the_branched_studys_targets_say_by_how_much_the_best_rule_misses_them()
         ">= 2,000: met (the best IQM, 2,500: no rule, cut at 5 steps); P(> PPO) above 0.75: "
         "met (the highest, 1.00: no rule, cut at 5 steps)."
     ) in text
-    assert "targets on inverted_pendulum" not in branched.section(
+    assert "targets on inverted_pendulum" not in report_branched.section(
         [{**r, "env": "inverted_pendulum"} for r in rows]
     )
 
 
 def test_the_cached_branched_study_rereads_finished_rows_and_trains_nothing(tmp_path, monkeypatch):
-    from experiments.paper import branched
 
     runs = tmp_path / "runs" / "branched"
     for name in ("hopper-ld-s5-100", "hopper-ld-s5+5-100"):
@@ -720,7 +715,7 @@ def test_the_cached_branched_study_rereads_finished_rows_and_trains_nothing(tmp_
 
     def results_of(env, rule, out, summary, steps):
         read.append(out.name)
-        return {"env": env, "rule": rule, "steps": steps, "name": branched.RULES[rule][2],
+        return {"env": env, "rule": rule, "steps": steps, "name": branched_rules.RULES[rule][2],
                 "seeds": 5, "final_moving_return": [7.0] * 5, "eval_return": [7.0] * 5,
                 "imagined_per_real": 4.0, "steps_to_solve": None, "train_seconds": 1.0,
                 "late_return": [7.0] * 5}  # fmt: skip
@@ -729,7 +724,7 @@ def test_the_cached_branched_study_rereads_finished_rows_and_trains_nothing(tmp_
     monkeypatch.setattr(branched.cache, "ensure_run", lambda *a: pytest.fail("trained"))
 
     def row(rule, seeds):
-        return {"env": "hopper", "rule": rule, "steps": 100, "name": branched.RULES[rule][2],
+        return {"env": "hopper", "rule": rule, "steps": 100, "name": branched_rules.RULES[rule][2],
                 "seeds": seeds, "final_moving_return": [1.0] * seeds,
                 "eval_return": [1.0] * seeds, "imagined_per_real": 4.0, "steps_to_solve": None,
                 "train_seconds": 1.0}  # fmt: skip
@@ -789,18 +784,16 @@ def test_the_family_study_says_which_model_runs_never_imagined(tmp_path):
 
 
 def test_the_branched_presets_ppo_ldn_is_the_studys_ld_row_where_it_beat_ppo():
-    from experiments.paper import branched
     from ldn_jax.config import from_preset, validate
 
     for env in ("halfcheetah", "inverted_pendulum"):
-        study = branched.config_of(env, "ld", 5, 200_000)
+        study = branched_rules.config_of(env, "ld", 5, 200_000)
         user = from_preset("branched", env=env, algo="ppo-ldn", seeds=5, steps=200_000)
-        solved = branched.SOLVED.get(env)
+        solved = branched_rules.SOLVED.get(env)
         assert study == validate(dataclasses.replace(user, solved_return=solved))
 
 
 def test_the_branched_studys_figure_draws_from_its_rows_alone(tmp_path):
-    from experiments.paper import branched
 
     def row(env, rule, scores, solve=None):
         return {
@@ -818,9 +811,9 @@ def test_the_branched_studys_figure_draws_from_its_rows_alone(tmp_path):
         row("inverted_pendulum", "ppo", [1.0, 1.0], solve=[300, 500]),
         row("inverted_pendulum", "cap-15", [1.0, 1.0], solve=[200, 400]),
     ]
-    branched.figure(rows, tmp_path / "branched.png")
+    report_branched.figure(rows, tmp_path / "branched.png")
     assert (tmp_path / "branched.png").stat().st_size > 0
-    assert "![branched](branched/branched.png)" in branched.section(
+    assert "![branched](branched/branched.png)" in report_branched.section(
         [r | {"name": "", "final_moving_return": [0.0] * 3, "late_return": None,
               "imagined_per_real": 0.0, "train_seconds": 1.0} for r in rows[:3]]
     )  # fmt: skip
