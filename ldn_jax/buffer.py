@@ -68,6 +68,16 @@ def buffer_sample(buffer: Buffer, key: Array, batch_size: int) -> Transitions:
     return jax.tree.map(lambda d: d[index], buffer.data)
 
 
+def buffer_sample_recent(buffer: Buffer, key: Array, batch_size: int, window: int) -> Transitions:
+    """Uniform draw with replacement from the newest `window` stored transitions (all of them
+    while fewer are stored): the ring holds them in the order they were added, the newest
+    just behind the cursor."""
+    count = jnp.maximum(jnp.minimum(buffer.size, window), 1)
+    back = jax.random.randint(key, (batch_size,), 0, count)
+    index = (buffer.cursor - 1 - back) % buffer.capacity
+    return jax.tree.map(lambda d: d[index], buffer.data)
+
+
 HOLDOUT_EVERY = 10
 """One slot in this many (slots 0, 10, 20, ...) is held out from a probabilistic model's fit,
 to rank its members (`ModelConfig.elites`)."""

@@ -281,6 +281,12 @@ class ModelConfig:
     `branches` rollouts, so every update is a full batch; `imagine` is not read."""
     branches: int = 64
     """`imagine_start` "real": the imagined rollouts played side by side."""
+    start_window: int = 0
+    """`imagine_start` "real": branches start from states of the newest `start_window` real
+    transitions in R; 0 draws from all of R (MBPO's way, for an off-policy learner). An
+    on-policy learner's updates are meant for the states its current policy visits, where
+    all of R holds every earlier policy's (on hopper at 200k steps, half of it from the
+    first 100k: mostly falls)."""
     imagined_ratio: float = 4.0
     """`imagine_start` "real": imagined steps per real step of the iteration (at least; in
     whole segments of `branches` x n steps)."""
@@ -880,6 +886,11 @@ def validate(config: Config) -> Config:
             f"unknown imagine_start {model.imagine_start!r}; valid: {', '.join(IMAGINE_STARTS)}",
         ),
         (model.branches >= 1, f"branches must be >= 1, got {model.branches}"),
+        (model.start_window >= 0, f"start_window must be >= 0, got {model.start_window}"),
+        (
+            model.start_window == 0 or model.imagine_start == "real",
+            "start_window picks where branches start: it needs imagine_start 'real'",
+        ),
         (
             model.imagine_start == "initial"
             or config.algo not in ALGORITHMS

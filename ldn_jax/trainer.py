@@ -23,7 +23,7 @@ from flax import struct
 from jax.sharding import Mesh
 
 from ldn_jax import envs
-from ldn_jax.buffer import Buffer, Transitions, buffer_add, buffer_init
+from ldn_jax.buffer import Buffer, Transitions, buffer_add, buffer_init, buffer_sample_recent
 from ldn_jax.config import Config, with_values
 from ldn_jax.dynamics import Dynamics, ModelState, action_encoder
 from ldn_jax.imagination import (
@@ -303,6 +303,8 @@ class Trainer:
         buffer = state.buffer
 
         def draw(key: Array) -> Array:
+            if config.start_window:
+                return buffer_sample_recent(buffer, key, config.branches, config.start_window).obs
             index = jax.random.randint(key, (config.branches,), 0, jnp.maximum(buffer.size, 1))
             return buffer.data.obs[index]
 

@@ -10,7 +10,14 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from ldn_jax.buffer import HOLDOUT_EVERY, Transitions, buffer_add, buffer_init, buffer_sample_split
+from ldn_jax.buffer import (
+    HOLDOUT_EVERY,
+    Transitions,
+    buffer_add,
+    buffer_init,
+    buffer_sample_recent,
+    buffer_sample_split,
+)
 from ldn_jax.config import ModelConfig, from_preset, validate
 from ldn_jax.dynamics import Dynamics, gaussian_nll
 from ldn_jax.host import flags
@@ -119,6 +126,15 @@ def _buffer(size: int, obs_size: int = 4, action_size: int = 2, capacity: int = 
     return buffer_add(buffer_init(capacity, obs_size, action_size), batch, jnp.ones(size, bool))
 
 
+def test_the_recent_draw_takes_the_newest_transitions_of_a_wrapped_ring():
+    buffer = _buffer(100)  # capacity 64: transitions 36..99 stored, 99 just behind the cursor
+    drawn = np.asarray(buffer_sample_recent(buffer, jax.random.key(0), 2000, 10).obs[:, 0])
+    assert set(drawn.astype(int)) == set(range(90, 100))
+    # Fewer stored than the window: all of them, and nothing of the empty slots.
+    drawn = np.asarray(buffer_sample_recent(_buffer(5), jax.random.key(1), 2000, 10).obs[:, 0])
+    assert set(drawn.astype(int)) == set(range(5))
+
+
 def test_the_held_out_slots_are_never_drawn_for_the_fit():
     buffer = _buffer(37)
     held = buffer_sample_split(buffer, jax.random.key(0), 2000, True).obs[:, 0]
@@ -195,6 +211,14 @@ def test_a_branch_starts_from_a_state_in_the_real_buffer():
     for t in np.flatnonzero(played):
         time = np.where(starts[t], 1, time + 1)
         assert (time <= 4).all()
+    # `model.start_window`: every branch starts from one of the newest 5 transitions.
+    trainer = Trainer(_config(model={"start_window": 5}))
+    _, episodes = jax.jit(trainer.branch_stage)(state, jax.random.key(4), jnp.float32(1.0), real)
+    steps = episodes.steps
+    starts = np.concatenate([np.ones((1, steps.done.shape[1]), bool), np.asarray(steps.done[:-1])])
+    live = starts & (np.asarray(steps.weight) > 0)  # the unplayed rest of the batch is zeros
+    first = np.round(np.asarray(steps.obs)[live][:, 0] * 1000).astype(int)
+    assert len(first) > steps.done.shape[1] and set(first) == set(range(18, 23))
 
 
 def _stages(trainer: Trainer):
@@ -335,6 +359,11 @@ def _build(*argv):
         ),
         (["--algo", "ppo-model", "--set", "model.imagined_epochs=2"], "needs imagine_start 'real'"),
         (["--algo", "ppo-model", "--set", "model.imagined_epochs=-1"], "must be >= 0, got -1"),
+        (["--algo", "ppo-model", "--set", "model.start_window=100"], "needs imagine_start 'real'"),
+        (
+            ["--algo", "ppo-model", "--preset", "branched", "--set", "model.start_window=-1"],
+            "start_window must be >= 0, got -1",
+        ),
         (
             ["--algo", "ppo-model", "--set", "model.imagined_updates=critic"],
             "imagined_updates 'critic' needs branched imagination",

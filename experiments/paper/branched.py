@@ -14,6 +14,7 @@ imagined states in the model's place (`model.world` "true": what a perfect model
 "true-reward": its reward and termination only; "true-state": its states and termination
 only), eight times the model's fit steps, the model fitted to the critic's values too
 (`model.value_loss`), imagined rows that train the critic only (`model.imagined_updates`),
+branches from the newest real states only (`model.start_window`),
 twice the imagined steps per real one, or 5 epochs on imagined rows, which are not rules.
 Per rule and env: IQM [95% interval] of the final moving return, of the training return over
 the last 10% of steps and of the greedy return after training, P(improvement) of the greedy

@@ -92,6 +92,11 @@ RULES = {
         {"horizon": 15, "imagined_epochs": 10},
         "LD draw, disagreement, cap 15, 10 epochs on imagined rows",
     ),
+    "recent-5": (
+        "ppo-model",
+        {"horizon": 5, "start_window": 10_240},
+        "no rule, cut at 5 steps, branches from the newest 10,240 real states",
+    ),
     "critic-5": (
         "ppo-model",
         {"horizon": 5, "imagined_updates": "critic"},
@@ -115,6 +120,7 @@ ONLY = {
             "true-reward-5",
             "true-state-5",
             "critic-5",
+            "recent-5",
         )
     },
     "ratio-8": ("halfcheetah",),
