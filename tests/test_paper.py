@@ -142,6 +142,19 @@ def smoke(tmp_path_factory):
     return results, done.stdout
 
 
+def test_make_paper_answers_help_and_bad_flags_before_any_script_runs(capsys):
+    from experiments.paper import all as every
+
+    with pytest.raises(SystemExit) as bad:
+        every.main(["--scale", "nope"])
+    assert bad.value.code == 2
+    with pytest.raises(SystemExit) as asked:
+        every.main(["--help"])
+    assert asked.value.code == 0
+    out = capsys.readouterr().out
+    assert "Every paper script in order" in out and "== table2" not in out
+
+
 def _json(results: Path, name: str) -> dict:
     return json.loads((results / name / f"{name}.json").read_text())
 

@@ -14,6 +14,7 @@ import time
 
 from experiments.paper import (
     calibration,
+    common,
     figure4,
     figure5,
     figure9,
@@ -43,6 +44,7 @@ SCRIPTS = (
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+    common.parse_args(argv, __doc__)  # `--help` and bad flags answered here, before any script
     for script in SCRIPTS:
         name = script.__name__.rsplit(".", 1)[-1]
         start = time.perf_counter()

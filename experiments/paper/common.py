@@ -154,7 +154,9 @@ SCALES["cpu-full"] = replace(
 
 
 def parse_args(argv: list[str] | None, description: str) -> tuple[Scale, Path]:
-    p = argparse.ArgumentParser(description=description)
+    p = argparse.ArgumentParser(
+        description=description, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     p.add_argument(
         "--scale", choices=("cpu", "cpu-full", "paper"), default="cpu", help="default: cpu"
     )
