@@ -205,7 +205,7 @@ PRESETS["branched"] = {
         "inverted_pendulum": {"iteration_steps": 100, "model.horizon": 15},
         # halfcheetah's cut (ppo-ldn's cap): 15, under which the LD draw beats PPO at 10 seeds
         # (greedy IQM 4,350 against 3,761, P 0.81 [0.58, 0.97]); ppo-model's cut there
-        # measured 4,265 (5 seeds) against 3,917 at 5 (10 seeds): docs/defaults.md.
+        # measured 4,332 against 3,917 at 5 (10 seeds each): docs/defaults.md.
         "halfcheetah": {
             "iteration_steps": 100,
             "model.horizon": 15,
