@@ -311,6 +311,13 @@ class ModelConfig:
     and their optimiser moments stay as the real updates left them. The model's errors then
     reach the policy only through the critic's values, not through advantages on imagined
     rows. The `real_share` rows mixed into those updates train the critic only too."""
+    imagined_actor_step: float = 1.0
+    """`imagine_start` "real", in [0, 1] (ours, for studies): the size of the actor's and
+    log std's steps on imagined rows, as a share of their own (a learning rate that much
+    smaller there); 1 is the whole step. Between `imagined_updates` "critic" (no step) and
+    "all" (the whole step): the imagined advantages still move the policy, less far than
+    the real ones move it per update. Unlike "critic", the imagined gradients enter the
+    actor's optimiser moments, its global-norm clip and PPO's KL guard whole."""
     imagined_epochs: int = 0
     """`imagine_start` "real", for PPO: the epochs of each update on imagined rows; 0 takes
     the learner's own (`AgentConfig.epochs`). Imagined rows are fresh every iteration, so
@@ -927,6 +934,16 @@ def validate(config: Config) -> Config:
         (
             model.imagined_updates == "all" or model.imagine_start == "real",
             "imagined_updates 'critic' needs branched imagination (imagine_start 'real')",
+        ),
+        (
+            0 <= model.imagined_actor_step <= 1,
+            f"imagined_actor_step must be in [0, 1], got {model.imagined_actor_step}",
+        ),
+        (
+            model.imagined_actor_step == 1
+            or (model.imagine_start == "real" and model.imagined_updates == "all"),
+            "imagined_actor_step scales the actor's steps on branched imagination's rows: it "
+            "needs imagine_start 'real' and imagined_updates 'all'",
         ),
         (model.imagined_epochs >= 0, f"imagined_epochs must be >= 0, got {model.imagined_epochs}"),
         (

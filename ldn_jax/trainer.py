@@ -325,7 +325,9 @@ class Trainer:
             horizon = scheduled_horizon(config, state.env_steps + played)
         frozen = ("actor", "log_std") if config.imagined_updates == "critic" else ()
         player = Player(
-            self.learner.freezing(frozen).with_epochs(config.imagined_epochs),
+            self.learner.freezing(frozen)
+            .scaling(("actor", "log_std"), config.imagined_actor_step)
+            .with_epochs(config.imagined_epochs),
             world,
             self.max_steps,
             horizon=horizon,

@@ -234,6 +234,25 @@ def _stages(trainer: Trainer):
     return state, real_state, after
 
 
+def test_a_quarter_actor_step_moves_the_actor_less_on_imagined_rows_only():
+    """`model.imagined_actor_step` 0.25: the branched stage moves the actor, by less than the
+    whole step does, and the real stage is the whole learner's."""
+    change = {}
+    for share in (1.0, 0.25):
+        trainer = Trainer(_config(model={"imagined_actor_step": share}))
+        state, real_state, after = _stages(trainer)
+        size = lambda a, b: sum(
+            float(np.abs(np.asarray(x) - np.asarray(y)).sum())
+            for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True)
+        )
+        change[share] = (
+            size(state.learner.params["actor"], real_state.learner.params["actor"]),
+            size(state.learner.params["actor"], after.learner.params["actor"]),
+        )
+    assert change[0.25][0] == change[1.0][0] > 0
+    assert 0 < change[0.25][1] < 0.6 * change[1.0][1]
+
+
 def test_critic_only_imagination_moves_the_critic_and_leaves_the_actor():
     """`model.imagined_updates` "critic": the branched stage's updates train the critic, and
     the actor's parameters and optimiser moments stay as they were; "all" moves both."""
@@ -367,6 +386,19 @@ def _build(*argv):
         (
             ["--algo", "ppo-model", "--set", "model.imagined_updates=critic"],
             "imagined_updates 'critic' needs branched imagination",
+        ),
+        (
+            ["--algo", "ppo-model", "--preset", "branched", "--set", "model.imagined_actor_step=2"],
+            "imagined_actor_step must be in [0, 1], got 2",
+        ),
+        (
+            ["--algo", "ppo-model", "--set", "model.imagined_actor_step=0.5"],
+            "needs imagine_start 'real' and imagined_updates 'all'",
+        ),
+        (
+            ["--algo", "ppo-model", "--preset", "branched",
+             "--set", "model.imagined_updates=critic", "--set", "model.imagined_actor_step=0.5"],
+            "needs imagine_start 'real' and imagined_updates 'all'",
         ),
         (
             ["--algo", "ppo-model", "--preset", "branched", "--env", "cartpole-v1",

@@ -418,3 +418,28 @@ def test_a_frozen_actor_takes_no_step_and_leaves_the_clip_and_kl_to_the_critic()
     # Unfrozen, the same update is stopped by the KL guard at once and moves the actor.
     _, info = jax.jit(learner.update)(start, _bandit_segment(jax.random.key(2)), jax.random.key(3))
     assert float(info["kl_stopped"]) > 0
+
+
+def test_a_scaled_actor_steps_that_share_of_its_whole_step_and_the_critic_its_own():
+    """`scaling` (branched `model.imagined_actor_step`): one optimiser step moves the actor
+    and log std by `scale` times the unscaled step from the same gradients, the critic by
+    the same step, and the optimiser's moments are the unscaled learner's."""
+    agent = from_preset("paper", algo="a2c", agent={"log_std_init": 0.0}).agent
+    learner = A2C(agent, obs_size=2, action_spec=Box((-1.0,), (1.0,)))
+    start = learner.init(jax.random.key(0))
+    grads = jax.tree.map(lambda x: jax.random.normal(jax.random.key(x.size), x.shape), start.params)
+    whole = learner.apply_gradients(start, grads)
+    quarter = learner.scaling(("actor", "log_std"), 0.25).apply_gradients(start, grads)
+    leaves = lambda s, name: jax.tree.leaves(s.params[name])
+    step = lambda s, name: [
+        np.asarray(b) - np.asarray(a)
+        for a, b in zip(leaves(start, name), leaves(s, name), strict=True)
+    ]
+    for name, share in (("actor", 0.25), ("log_std", 0.25), ("critic", 1.0)):
+        for w, q in zip(step(whole, name), step(quarter, name), strict=True):
+            assert np.abs(w).max() > 0
+            np.testing.assert_allclose(q, share * w, rtol=1e-4, atol=1e-7)  # float32 params
+    moments = [jax.tree.leaves(s.opt_state) for s in (whole, quarter)]
+    for a, b in zip(*moments, strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    assert learner.scaling(("actor",), 1.0) is learner

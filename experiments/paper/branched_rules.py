@@ -102,6 +102,11 @@ RULES = {
         {"horizon": 5, "imagined_updates": "critic"},
         "no rule, cut at 5 steps, imagined rows train the critic only",
     ),
+    "actor-quarter-5": (
+        "ppo-model",
+        {"horizon": 5, "imagined_actor_step": 0.25},
+        "no rule, cut at 5 steps, the actor's steps on imagined rows a quarter of their size",
+    ),
 }
 """Rule -> (algorithm, model fields over the preset's, how the report names it)."""
 
@@ -120,6 +125,7 @@ ONLY = {
             "true-reward-5",
             "true-state-5",
             "critic-5",
+            "actor-quarter-5",
             "recent-5",
         )
     },

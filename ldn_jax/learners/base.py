@@ -248,6 +248,9 @@ class ActorCritic:
     frozen: tuple[str, ...] = ()
     """Top-level entries of the params that updates do not move (`freezing`)."""
 
+    step_scale: tuple[tuple[str, ...], float] = ((), 1.0)
+    """Top-level entries of the params whose steps are scaled, and by how much (`scaling`)."""
+
     def __init__(self, config: AgentConfig, obs_size: int, action_spec, workers: int = 1):
         """`action_spec`: an env's `ActionSpec`, or the number of discrete actions; `workers`:
         how many real workers play (the running returns of `normalize_reward`)."""
@@ -296,6 +299,16 @@ class ActorCritic:
         learner.frozen = tuple(names)
         return learner
 
+    def scaling(self, names: tuple[str, ...], scale: float) -> ActorCritic:
+        """This learner with the optimiser's steps for the params entries `names` multiplied
+        by `scale` (a learning rate of `scale` times their own); their gradients still enter
+        the optimiser's moments whole. A scale of 1 is this learner."""
+        if scale == 1.0:
+            return self
+        learner = copy.copy(self)
+        learner.step_scale = (tuple(names), float(scale))
+        return learner
+
     def with_epochs(self, epochs: int) -> ActorCritic:
         """This learner with `epochs` passes per update (0: its own); the optimiser and
         everything else are shared."""
@@ -306,10 +319,17 @@ class ActorCritic:
         return learner
 
     def apply_gradients(self, state: LearnerState, grads: dict) -> LearnerState:
-        """One optimiser step from `grads`, frozen entries (`freezing`) left as they are."""
+        """One optimiser step from `grads`, frozen entries (`freezing`) left as they are and
+        scaled ones (`scaling`) moved that much less."""
         grads = self._unfrozen(grads)
         updates, opt_state = self.optimizer.update(grads, state.opt_state, state.params)
         updates = self._unfrozen(updates)
+        names, scale = self.step_scale
+        if names:
+            updates = {
+                n: jax.tree.map(lambda u: u * scale, v) if n in names else v
+                for n, v in updates.items()
+            }
         return LearnerState(optax.apply_updates(state.params, updates), opt_state)
 
     def _unfrozen(self, tree: dict) -> dict:
