@@ -453,6 +453,21 @@ def test_the_branched_preset_gives_its_model_to_model_based_algorithms_only(algo
     assert paper.agent.hidden_layers == (2 if algo.startswith("ppo") else 1)
 
 
+def test_hoppers_branched_preset_trains_the_critic_only_on_imagined_rows():
+    """hopper's measured default under `branched`: imagined rows train the critic only, for
+    every model-based algorithm; the model-free learner beside them has no model settings."""
+    for algo in ("ppo-model", "ppo-ldn", "a2c-model", "ldn"):
+        assert validate(
+            from_preset("branched", env="hopper", algo=algo)
+        ).model.imagined_updates == ("critic")
+        assert validate(
+            from_preset("branched", env="halfcheetah", algo=algo)
+        ).model.imagined_updates == ("all")
+    assert validate(from_preset("branched", env="hopper", algo="ppo")).model.imagine_start == (
+        "initial"
+    )
+
+
 def test_explain_names_the_preset_env_and_learner_layer():
     given = {"env": ("halfcheetah", "flag"), "algo": ("ppo", "flag")}
     from ldn_jax.config import explain

@@ -627,6 +627,12 @@ def test_the_branched_study_adds_seeds_to_a_finished_run_and_merges_their_rows(
     assert row["final_moving_return"] == [1.0] * 5 + [3.0] * 3 and row["eval_return"][-1] == 4.0
     assert (row["seeds"], row["imagined_per_real"], row["train_seconds"]) == (8, 2.5, 15.0)
     assert branched_rules.config_of("hopper", "ld", 5, 100, first_seed=5).first_seed == 5
+    # The study's rules keep their meaning whatever the preset's task default: on hopper
+    # (whose preset trains the critic only on imagined rows) only the rules that say so do.
+    updates = lambda rule: branched_rules.config_of("hopper", rule, 5, 100).model.imagined_updates
+    assert [updates(r) for r in ("cap-5", "ld", "critic-5", "ld-critic-5")] == [
+        "all", "all", "critic", "critic"
+    ]  # fmt: skip
 
 
 def test_the_late_training_return_reads_the_last_tenth_of_the_budget():

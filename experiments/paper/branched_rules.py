@@ -102,6 +102,11 @@ RULES = {
         {"horizon": 5, "imagined_updates": "critic"},
         "no rule, cut at 5 steps, imagined rows train the critic only",
     ),
+    "ld-critic-5": (
+        "ppo-ldn",
+        {"horizon": 5, "imagined_updates": "critic"},
+        "LD draw, disagreement, cap 5, imagined rows train the critic only",
+    ),
     "actor-quarter-5": (
         "ppo-model",
         {"horizon": 5, "imagined_actor_step": 0.25},
@@ -129,6 +134,7 @@ ONLY = {
             "recent-5",
         )
     },
+    "ld-critic-5": ("hopper",),
     "ratio-8": ("halfcheetah",),
     "ld-ratio-8": ("halfcheetah",),
     "epochs-5": ("halfcheetah",),
@@ -141,6 +147,8 @@ and variants are questions about the two locomotion tasks."""
 
 def config_of(env: str, rule: str, seeds: int, steps: int, first_seed: int = 0):
     algo, model, _ = RULES[rule]
+    if algo != "ppo":  # imagined rows train the whole learner unless the rule says otherwise,
+        model = {"imagined_updates": "all", **model}  # whatever the preset's task default
     if model.get("stop") == "mbpo":
         model = {**model, **SCHEDULES[env]}
     config = from_preset(
