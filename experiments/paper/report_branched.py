@@ -39,7 +39,9 @@ def section(rows: list[dict]) -> str:
         "## Stopping rules with branched rollouts",
         "",
         "Ours, `python -m experiments.paper.branched`: under the `branched` preset every rule "
-        "ends branches of imagination from real states; each env at its budget; IQM [95% "
+        "ends branches of imagination from real states, and the imagined rows train the "
+        "whole learner unless the rule says otherwise (hopper's preset has them train the "
+        "critic only, since this study); each env at its budget; IQM [95% "
         "bootstrap interval]. The greedy return is the trainer's own "
         "evaluation after training (10 episodes). P(improvement) compares greedy returns, or, "
         "where every rule solves the task in the budget, real steps to a greedy return of 900 "
