@@ -224,6 +224,48 @@ def test_a_finished_mujoco_run_leaves_a_record_that_stands_in_for_its_directory(
     assert trained == [other]
 
 
+def test_the_plan_says_where_each_mujoco_run_stands_without_training(smoke, tmp_path, monkeypatch):
+    from experiments.paper import plan
+
+    results, _ = smoke
+    shutil.copytree(results / "runs" / "smoke", tmp_path / "runs" / "smoke")
+    shutil.copytree(results / "records" / "smoke", tmp_path / "records" / "smoke")
+    monkeypatch.setattr(cache, "train", lambda *a, **k: pytest.fail("trained"))
+    monkeypatch.setattr(cache, "ensure_run", lambda *a, **k: pytest.fail("ensured"))
+    scale = plan.common.SCALES["smoke"]
+    table = plan.rows(scale, tmp_path)
+    ours = [(r["result"], r["algo"]) for r in table if r["state"] != "not at this scale"]
+    assert ours == [("figure9", "ldn"), ("table4", "a2c-model"), ("table4", "ldn")] + [
+        ("table5", algo) for algo in ("ppo", "ppo-model", "ppo-ldn")
+    ]
+    assert {r["env"] for r in table if r["state"] == "not at this scale"} == set(
+        plan.common.MUJOCO
+    ) - {"inverted_pendulum"}
+    assert all(
+        r["state"] == "done" and r["seconds"] > 0 for r in table if r["env"] == "inverted_pendulum"
+    )
+    # the record stands in for a run directory that is gone
+    gone = tmp_path / "runs" / "smoke" / "inverted_pendulum-ppo"
+    shutil.rmtree(gone)
+    # an interrupted run: its summary (the last thing a run writes) is not there
+    cut = tmp_path / "runs" / "smoke" / "inverted_pendulum-ppo-model"
+    (cut / "summary.json").unlink()
+    steps = [json.loads(line) for line in (cut / "metrics.jsonl").read_text().splitlines()]
+    last = max(s["iteration"] for s in steps)
+    fewest = min(s["env_steps"] for s in steps if s["iteration"] == last)
+    # a run of another config, with no record: trained from scratch
+    other = tmp_path / "runs" / "smoke" / "inverted_pendulum-ppo-ldn"
+    config = json.loads((other / "config.json").read_text())
+    (other / "config.json").write_text(json.dumps({**config, "seeds": config["seeds"] + 1}))
+    shutil.rmtree(tmp_path / "records" / "smoke" / "inverted_pendulum-ppo-ldn")
+    table = plan.rows(scale, tmp_path)
+    states = {r["algo"]: r for r in table if r["result"] == "table5" and "seeds" in r}
+    assert states["ppo"]["state"] == "record" and states["ppo"]["seconds"] > 0
+    assert states["ppo-model"] == states["ppo-model"] | {"state": "partial", "steps": fewest}
+    assert states["ppo-ldn"]["state"] == "new"
+    assert plan.summary(table).startswith("4 of 6 runs finished (1 from records)")
+
+
 def test_smoke_readings_and_stopping_rules(smoke):
     results, _ = smoke
     readings = _json(results, "readings")

@@ -73,6 +73,7 @@ def ensure_run(config: Config, out: Path) -> dict:
             return summary
         shutil.rmtree(out)
     elif (summary := _recorded_summary(config, out)) is not None:
+        print(f"reusing the record {record_of(out)}", flush=True)
         return summary
     out.mkdir(parents=True, exist_ok=True)
     print(f"training {config.env} {config.algo} K={config.k} -> {out}", flush=True)
@@ -83,6 +84,33 @@ def ensure_run(config: Config, out: Path) -> dict:
     )
     _keep_record(config, out)
     return summary
+
+
+def progress(config: Config, out: Path) -> dict:
+    """Where the run of `config` in `out` stands, without training: `{"state": "done",
+    "seconds"}` (finished there, or its record stands in: state "record"; seconds of training
+    and compile), `{"state": "partial", "steps"}` (interrupted: the fewest real steps of any
+    seed at its last logged iteration; `ensure_run` resumes it from its last checkpoint) or
+    `{"state": "new"}` (nothing of this config there: trained from scratch)."""
+    run = RunDir(out)
+    same = run.holds_run() and _same_config(json.loads(run.config_file.read_text()), config)
+    summary = run.read_summary() if same and run.is_finished() else None
+    state = "done"
+    if summary is None and not same:
+        summary, state = _recorded_summary(config, out), "record"
+    if summary is not None:
+        return {"state": state, "seconds": summary["train_seconds"] + summary["compile_seconds"]}
+    if not same:
+        return {"state": "new"}
+    last: dict[int, list[int]] = {}
+    if run.metrics_file.is_file():
+        for line in run.metrics_file.read_text().splitlines():
+            try:
+                entry = json.loads(line)
+            except json.JSONDecodeError:  # a line cut by the interruption
+                continue
+            last.setdefault(entry["iteration"], []).append(entry["env_steps"])
+    return {"state": "partial", "steps": min(last[max(last)]) if last else 0}
 
 
 # A MuJoCo run at 1M steps costs minutes to an hour, and its directory (checkpoints, buffers)
@@ -129,7 +157,6 @@ def _recorded_summary(config: Config, out: Path) -> dict | None:
         return None
     if not _same_config(json.loads((record / "config.json").read_text()), config):
         return None
-    print(f"reusing the record {record}", flush=True)
     return json.loads((record / "summary.json").read_text())
 
 
