@@ -204,12 +204,18 @@ class Trainer:
         keys = jax.random.split(key, count or self.config.workers)
         return jax.vmap(self.env.reset, (0, None))(keys, self.env_params)
 
+    def _step_workers(self, keys: Array, world, action: Array, alive: Array) -> tuple:
+        """The env's step, vmapped over workers: every worker steps and `alive` decides what
+        counts; an env with `step_active` skips the physics of the workers not alive."""
+        if hasattr(self.env, "step_active"):
+            step = jax.vmap(self.env.step_active, (0, 0, 0, None, 0))
+            return step(keys, world, action, self.env_params, alive)
+        return jax.vmap(self.env.step, (0, 0, 0, None))(keys, world, action, self.env_params)
+
     def _env_world(self, key: Array, world, obs: Array, action: Array, alive: Array):
-        del alive  # every worker steps; the mask decides what counts
         keys = jax.random.split(key, action.shape[0])
-        step = jax.vmap(self.env.step, (0, 0, 0, None))
-        next_obs, world, reward, terminated, truncated, _ = step(
-            keys, world, action, self.env_params
+        next_obs, world, reward, terminated, truncated, _ = self._step_workers(
+            keys, world, action, alive
         )
         return next_obs, world, reward, terminated, truncated, {}
 
@@ -596,13 +602,12 @@ class Trainer:
         obs, env_state = jax.vmap(self.env.reset, (0, None))(
             jax.random.split(key, n), self.env_params
         )
-        step = jax.vmap(self.env.step, (0, 0, 0, None))
 
         def body(carry, key):
             obs, env_state, alive, total = carry
             action = self.learner.greedy(state.learner.params, obs)
-            obs, env_state, reward, terminated, truncated, _ = step(
-                jax.random.split(key, n), env_state, action, self.env_params
+            obs, env_state, reward, terminated, truncated, _ = self._step_workers(
+                jax.random.split(key, n), env_state, action, alive
             )
             total = total + reward * alive
             alive = alive & ~(terminated | truncated)

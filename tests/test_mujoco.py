@@ -206,6 +206,32 @@ def test_native_vmapped_equals_looped():
             np.testing.assert_array_equal(np.asarray(mine), np.asarray(theirs)[i // 3, i % 3])
 
 
+def test_native_steps_only_the_active_workers_and_those_as_step_does(monkeypatch):
+    """`step_active`: an inactive worker's physics is not stepped (its state stays); the
+    active ones' outputs equal `step`'s to the bit (ant: its contact forces' pass too)."""
+    env, params = _params("ant")
+    _, state = jax.vmap(env.reset, (0, None))(jax.random.split(jax.random.key(0), 4), params)
+    action = jnp.asarray(np.random.default_rng(0).uniform(-1, 1, (4, 8)), jnp.float32)
+    active = jnp.array([True, False, True, False])
+    engine, stepped = native.engine(TASKS["ant"]), []
+    host_step = engine._host_step
+
+    def counting(bits, ctrl, active=None):
+        stepped.append(None if active is None else int(active.sum()))
+        return host_step(bits, ctrl, active)
+
+    monkeypatch.setattr(engine, "_host_step", counting)
+    every = jax.vmap(env.step, (None, 0, 0, None))(None, state, action, params)
+    some = jax.vmap(env.step_active, (None, 0, 0, None, 0))(None, state, action, params, active)
+    assert stepped == [None, 2]  # one host call each; the second steps two rows
+    for mine, theirs in zip(jax.tree.leaves(some[:4]), jax.tree.leaves(every[:4]), strict=True):
+        np.testing.assert_array_equal(np.asarray(mine)[[0, 2]], np.asarray(theirs)[[0, 2]])
+    before, after = np.asarray(state.engine), np.asarray(some[1].engine)
+    np.testing.assert_array_equal(after[[1, 3]], before[[1, 3]])
+    assert not np.array_equal(np.asarray(every[1].engine)[1], before[1])
+    assert np.isfinite(some[0]).all() and np.isfinite(some[2]).all()
+
+
 def test_native_makes_one_host_call_per_step_for_the_whole_batch(monkeypatch):
     engine = native.engine(TASKS["inverted_pendulum"])
     calls = []

@@ -66,6 +66,11 @@ class Env(Protocol):
         ...
 
 
+# Optional: `step_active(key, state, action, params, active) -> step's outputs`, `step` for a
+# worker whose step counts only where `active` (bool): an env whose physics is costly per
+# worker (the native MuJoCo engine) skips it for inactive workers, whose outputs the caller
+# masks out. The trainer uses it for workers whose episode has ended and `step` otherwise.
+
 # Optional: `from_observation(obs, params) -> state`, the state an observation is of, for envs
 # whose observation is their whole state (CartPole). The oracle stop steps the real env
 # from imagined observations with it; envs without it refuse that rule.

@@ -120,10 +120,18 @@ class MujocoEnv:
     def step(
         self, key: Array, state: EnvState, action: Array, params: EnvParams
     ) -> tuple[Array, EnvState, Array, Array, Array, dict]:
+        return self.step_active(key, state, action, params, None)
+
+    def step_active(
+        self, key: Array, state: EnvState, action: Array, params: EnvParams, active: Array | None
+    ) -> tuple[Array, EnvState, Array, Array, Array, dict]:
+        """`step` for a worker whose step counts only where `active` (bool): the native
+        engine leaves the physics of an inactive worker unstepped (its outputs are finite
+        and meaningless; the caller masks them out), MJX computes every worker."""
         del key  # deterministic physics
         task, sim = TASKS[params.task], engine(params.task, params.backend)
         ctrl = control(task, action)
-        engine_state, physics = sim.step(state.engine, ctrl)
+        engine_state, physics = sim.step(state.engine, ctrl, active)
         reward = task.reward(state.physics, ctrl, physics, _dt(params.task))
         terminated = task.terminated(physics)
         time = state.time + 1

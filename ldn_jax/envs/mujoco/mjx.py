@@ -54,7 +54,8 @@ class MjxEngine:
             physics = physics.replace(cfrc_ext=jnp.zeros_like(physics.cfrc_ext))
         return data, physics
 
-    def step(self, data, ctrl: Array):
+    def step(self, data, ctrl: Array, active: Array | None = None):
+        del active  # every row computes on an accelerator; the caller masks the inactive
         data = data.replace(ctrl=ctrl)
         substep = lambda _, d: self.mjx.step(self.model, d)
         data = jax.lax.fori_loop(0, self.task.frame_skip, substep, data)

@@ -137,16 +137,28 @@ class NativeEngine:
                 xpos[i] = d.xpos[self.body_ids]
         return self._outputs(state, xpos, np.zeros((n, self.ncfrc, 6)), batch)
 
-    def _host_step(self, bits: np.ndarray, ctrl: np.ndarray) -> tuple:
+    def _host_step(self, bits: np.ndarray, ctrl: np.ndarray, active: np.ndarray | None = None):
+        """Steps the rows of the batch that are `active` (all without it); an inactive row
+        keeps its state, with zero body positions and forces."""
         batch = ctrl.shape[:-1]
         state = _from_bits(bits.reshape(-1, 2 * self.nstate))
         ctrl = np.asarray(ctrl, np.float64).reshape(-1, 1, self.nu)
+        rows = slice(None) if active is None else np.flatnonzero(active.reshape(-1))
+        after = state.copy()
+        xpos = np.zeros((state.shape[0], len(self.body_ids), 3))
+        cfrc = np.zeros((state.shape[0], self.ncfrc, 6))
         skip = self.task.frame_skip
         pool = _pool()
-        with pool.lock:
-            states, _ = pool.rollout.rollout(self.model, self.datas, state, ctrl, nstep=skip)
-            xpos, cfrc = self._after_step(states[:, -2] if skip > 1 else state, ctrl[:, 0])
-        return self._outputs(states[:, -1], xpos, cfrc, batch)
+        if state[rows].shape[0]:
+            with pool.lock:
+                live, live_ctrl = state[rows], ctrl[rows]
+                states, _ = pool.rollout.rollout(
+                    self.model, self.datas, live, live_ctrl, nstep=skip
+                )
+                last = states[:, -2] if skip > 1 else live
+                xpos[rows], cfrc[rows] = self._after_step(last, live_ctrl[:, 0])
+            after[rows] = states[:, -1]
+        return self._outputs(after, xpos, cfrc, batch)
 
     def _after_step(self, before_last: np.ndarray, ctrl: np.ndarray) -> tuple:
         """Tracked bodies' `xpos [B, bodies, 3]` and `cfrc_ext [B, nbody, 6]` as gymnasium
@@ -191,13 +203,17 @@ class NativeEngine:
         )
         return self._physics(out)
 
-    def step(self, bits: Array, ctrl: Array) -> tuple[Array, Physics]:
-        """One env step (`frame_skip` substeps) from `bits` with controls `ctrl [nu]`."""
+    def step(self, bits: Array, ctrl: Array, active: Array | None = None) -> tuple[Array, Physics]:
+        """One env step (`frame_skip` substeps) from `bits` with controls `ctrl [nu]`; with
+        `active` (bool) false, the physics is not stepped: the state stays, body positions
+        and forces are zero (the caller masks the step out)."""
+        extra = () if active is None else (active,)
         out = jax.pure_callback(
             self._host_step,
             self._out_shapes(ctrl.shape[:-1]),
             bits,
             ctrl.astype(jnp.float32),
+            *extra,
             vmap_method="broadcast_all",
         )
         return self._physics(out)
