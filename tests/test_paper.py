@@ -235,9 +235,9 @@ def test_the_plan_says_where_each_mujoco_run_stands_without_training(smoke, tmp_
     scale = plan.common.SCALES["smoke"]
     table = plan.rows(scale, tmp_path)
     ours = [(r["result"], r["algo"]) for r in table if r["state"] != "not at this scale"]
-    assert ours == [("figure9", "ldn"), ("table4", "a2c-model"), ("table4", "ldn")] + [
+    assert ours == [("table4", "a2c-model"), ("table4", "ldn")] + [
         ("table5", algo) for algo in ("ppo", "ppo-model", "ppo-ldn")
-    ]
+    ] + [("figure9", "ldn")]
     assert {r["env"] for r in table if r["state"] == "not at this scale"} == set(
         plan.common.MUJOCO
     ) - {"inverted_pendulum"}
@@ -264,6 +264,11 @@ def test_the_plan_says_where_each_mujoco_run_stands_without_training(smoke, tmp_
     assert states["ppo-model"] == states["ppo-model"] | {"state": "partial", "steps": fewest}
     assert states["ppo-ldn"]["state"] == "new"
     assert plan.summary(table).startswith("4 of 6 runs finished (1 from records)")
+    # --train: the unfinished runs, in order, and nothing else
+    trained = []
+    monkeypatch.setattr(cache, "ensure_run", lambda config, out: trained.append(out.name))
+    plan.main(["--smoke", "--results", str(tmp_path), "--train"])
+    assert trained == ["inverted_pendulum-ppo-model", "inverted_pendulum-ppo-ldn"]
 
 
 def test_smoke_readings_and_stopping_rules(smoke):

@@ -1,13 +1,17 @@
 """What a scale's MuJoCo results still need: every run of Tables 4 and 5 and Figure 9's MuJoCo
-panels, where it stands and what it cost. Trains nothing.
+panels, where it stands and what it cost; with `--train`, those runs trained one by one.
 
-    python -m experiments.paper.plan [--scale cpu|cpu-full|paper] [--results DIR]
+    python -m experiments.paper.plan [--scale cpu|cpu-full|paper] [--train] [--results DIR]
 
 A run is *done* (finished in its directory), *record* (its committed record stands in for
-it), *partial* (interrupted: `make paper` resumes it from its last checkpoint) or *new*
-(trained from scratch by the next `make paper`). Seconds are the finished runs' training and
-compile, as measured on the machine that ran them. `--scale cpu-full` is many hours on
-2 cores: this says how far it has come.
+it), *partial* (interrupted: resumed from its last checkpoint) or *new* (trained from
+scratch). Seconds are the finished runs' training and compile, as measured on the machine
+that ran them. `--scale cpu-full` is many hours on 2 cores: this says how far it has come.
+
+`--train` trains the runs that are not finished, in the order listed (Tables 4 and 5 before
+Figure 9's three K per task), each leaving its record, and writes no result file: the
+results in DIR stay those of the scale that made them until `make paper SCALE=...` rebuilds
+them from the finished runs, in seconds once all are there. Stopped, it resumes.
 """
 
 from __future__ import annotations
@@ -21,11 +25,11 @@ from experiments.paper import cache, common, figure9, table4, table5
 
 
 def runs(scale: common.Scale) -> list[tuple[str, str, str, tuple[float, ...]]]:
-    """(result, env, algo, K) of every MuJoCo run the scale's tables and figure read, in the
-    order `make paper` trains them (Figure 9 first)."""
-    out = [("figure9", env, "ldn", figure9.K_VALUES) for env in scale.ablation_envs]
-    out += [("table4", env, algo, (1.0,)) for env in table4.ENVS for algo in table4.ALGOS]
+    """(result, env, algo, K) of every MuJoCo run the scale's tables and figure read: Tables
+    4 and 5, then Figure 9 (its runs cost three K each)."""
+    out = [("table4", env, algo, (1.0,)) for env in table4.ENVS for algo in table4.ALGOS]
     out += [("table5", env, algo, (1.0,)) for env in table5.ENVS for algo in table5.ALGOS]
+    out += [("figure9", env, "ldn", figure9.K_VALUES) for env in scale.ablation_envs]
     return [run for run in out if run[1] in common.MUJOCO]
 
 
@@ -63,8 +67,20 @@ def summary(table: list[dict]) -> str:
     )
 
 
+def train(scale: common.Scale, results) -> None:
+    """Train every run of `rows` that is not finished, in order (records left behind)."""
+    for row in rows(scale, results):
+        if row["state"] in ("partial", "new"):
+            config = common.run_config(scale, row["env"], row["algo"], row["k"])
+            cache.ensure_run(config, row["dir"])
+
+
 def main(argv: list[str] | None = None) -> int:
-    scale, results = common.parse_args(argv, __doc__)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    training = "--train" in argv
+    scale, results = common.parse_args([a for a in argv if a != "--train"], __doc__)
+    if training:
+        train(scale, results)
     table = rows(scale, results)
     view = Table(title=f"MuJoCo runs of --scale {scale.name}", title_justify="left")
     for column in ("result", "env", "algo", "K", "seeds", "budget", "state", "s / steps done"):
