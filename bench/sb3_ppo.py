@@ -7,7 +7,8 @@ gymnasium[mujoco] in an interpreter of their own (`python -m venv V && V/bin/pip
 stable-baselines3 "gymnasium[mujoco]"`). Trains one seed on gymnasium's v5 task with the zoo's
 VecNormalize (observations and rewards), then plays 5 greedy episodes (env seeds 100-104) and
 prints one JSON line: task, seed, steps, training seconds, the greedy returns and their mean.
-docs/tuning-mujoco.md sets its figures beside `ldn-jax eval` of our runs.
+Its lines are kept, dated, in experiments/results/locomotion/sb3_zoo_ppo.jsonl, which the
+locomotion study sets beside our runs (REPORT.md); docs/tuning-mujoco.md discusses them.
 """
 
 from __future__ import annotations

@@ -625,6 +625,24 @@ def test_the_locomotion_study_states_each_tasks_ratio_to_the_zoo(tmp_path):
         "At the zoo's figure or above: ant (1 of 2 tasks). Not measured yet: halfcheetah, "
         "walker2d, ant-nocfrc. Not in the figure (its curve was not kept): ant." in text
     )
+    assert "Side by side" not in text  # no SB3 runs on these cores: no table
+    # SB3's runs on these cores, 1M-step lines only, beside ours, per task both have
+    sb3 = [
+        {"task": "hopper", "seed": 1, "steps": 1_000_000, "mean": 1000.0},
+        {"task": "hopper", "seed": 0, "steps": 1_000_000, "mean": 1300.0},
+        {"task": "hopper", "seed": 2, "steps": 200_000, "mean": 9999.0},
+        {"task": "walker2d", "seed": 0, "steps": 1_000_000, "mean": 10.0},
+    ]
+    (tmp_path / locomotion.SB3_RUNS).write_text("".join(json.dumps(r) + "\n" for r in sb3))
+    runs = locomotion.sb3_runs(tmp_path)
+    assert sorted(runs) == ["hopper", "walker2d"] and len(runs["hopper"]) == 2
+    text = locomotion.section(rows, runs)
+    # ours 1,205 twice against 1,300 and 1,000: one win and one loss each
+    assert (
+        "| hopper | 2 | 1,300, 1,000 | 1,150 [1,000, 1,300] | 1,205 [1,205, 1,205] "
+        "| 0.50 [0.00, 1.00] |" in text
+    )
+    assert "| walker2d |" not in text and "| ant | 2 |" not in text
     locomotion.curves(rows, tmp_path / "curves.png")  # from the kept curves, without the runs
     assert (tmp_path / "curves.png").stat().st_size > 0
     config = locomotion.config_of("walker2d", 5)

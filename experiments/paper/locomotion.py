@@ -40,6 +40,11 @@ came from gym's Ant-v3 with all-zero contact forces, which `ant-nocfrc` is in ef
 
 TITLE = "PPO on the locomotion tasks against the zoo"
 
+SB3_RUNS = "sb3_zoo_ppo.jsonl"
+"""Beside locomotion.json: SB3's PPO with the zoo's constants trained on these cores, one JSON
+line per task and seed as `bench/sb3_ppo.py TASK SEED STEPS` prints it (greedy returns of 5
+gymnasium episodes), appended by hand with the date; the 1M-step lines are set beside ours."""
+
 
 def config_of(env: str, seeds: int):
     return validate(from_preset("paper", env=env, algo="ppo", seeds=seeds))
@@ -79,7 +84,43 @@ def kept_curve(history: dict) -> dict:
     }
 
 
-def section(rows: list[dict]) -> str:
+def sb3_runs(out: Path) -> dict[str, list[dict]]:
+    """The 1M-step lines of `SB3_RUNS` in `out`, per task (none if the file is not there)."""
+    path, runs = out / SB3_RUNS, {}
+    if path.exists():
+        for line in path.read_text().splitlines():
+            run = json.loads(line)
+            if run["steps"] == 1_000_000:
+                runs.setdefault(run["task"], []).append(run)
+    return runs
+
+
+def side_by_side(rows: list[dict], sb3: dict[str, list[dict]]) -> list[str]:
+    """The lines setting SB3's runs on these cores beside ours, per task both have."""
+    both = [r for r in rows if r["env"] in sb3]
+    if not both:
+        return []
+    lines = [
+        "Side by side on these cores: SB3's PPO with the zoo's constants for the task "
+        f"(`bench/sb3_ppo.py`, 1M steps; `locomotion/{SB3_RUNS}`), each seed's greedy return "
+        "the mean of 5 gymnasium episodes, against ours above; P(ours better) is the chance "
+        "that a seed of ours scores above a seed of theirs, with its bootstrap interval.",
+        "",
+        "| task | SB3 seeds | SB3 greedy, per seed | SB3 IQM | ours IQM | P(ours better) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in both:
+        theirs = [run["mean"] for run in sorted(sb3[r["env"]], key=lambda run: run["seed"])]
+        ours = r["eval_return"]
+        lines.append(
+            f"| {r['env']} | {len(theirs)} | {', '.join(f'{v:,.0f}' for v in theirs)} "
+            f"| {stats.text(stats.estimate(theirs))} | {stats.text(stats.estimate(ours))} "
+            f"| {stats.improvement_text(stats.improvement(ours, theirs))} |"
+        )
+    return [*lines, ""]
+
+
+def section(rows: list[dict], sb3: dict[str, list[dict]] | None = None) -> str:
     lines = [
         f"## {TITLE}",
         "",
@@ -119,6 +160,7 @@ def section(rows: list[dict]) -> str:
             else ""
         ),
         "",
+        *side_by_side(rows, sb3 or {}),
     ]
     return "\n".join(lines)
 
@@ -179,7 +221,7 @@ def _write(out: Path, record: Path, rows: list[dict], results: Path) -> None:
         run = run_dir(results, row["env"], row["seeds"])
         if "curve" not in row and (run / "summary.json").exists():
             row["curve"] = kept_curve(cache.load_history(run))
-    (out / "locomotion.md").write_text(section(rows))
+    (out / "locomotion.md").write_text(section(rows, sb3_runs(out)))
     common.write_json(record, {"machine": common.machine(), "rows": rows})
     curves(rows, out / "locomotion.png")
 
