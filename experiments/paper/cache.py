@@ -93,10 +93,12 @@ def progress(config: Config, out: Path) -> dict:
     seed at its last logged iteration; `ensure_run` resumes it from its last checkpoint) or
     `{"state": "new"}` (nothing of this config there: trained from scratch)."""
     run = RunDir(out)
-    same = run.holds_run() and _same_config(json.loads(run.config_file.read_text()), config)
-    summary = run.read_summary() if same and run.is_finished() else None
-    state = "done"
-    if summary is None and not same:
+    held = run.holds_run()  # as `ensure_run` reads it: a record counts where no run is held
+    same = held and _same_config(json.loads(run.config_file.read_text()), config)
+    summary = state = None
+    if same and run.is_finished():
+        summary, state = run.read_summary(), "done"
+    elif not held:
         summary, state = _recorded_summary(config, out), "record"
     if summary is not None:
         return {"state": state, "seconds": summary["train_seconds"] + summary["compile_seconds"]}

@@ -143,15 +143,15 @@ class NativeEngine:
         batch = ctrl.shape[:-1]
         state = _from_bits(bits.reshape(-1, 2 * self.nstate))
         ctrl = np.asarray(ctrl, np.float64).reshape(-1, 1, self.nu)
-        rows = slice(None) if active is None else np.flatnonzero(active.reshape(-1))
+        rows = np.ones(len(state), bool) if active is None else active.reshape(-1)
         after = state.copy()
-        xpos = np.zeros((state.shape[0], len(self.body_ids), 3))
-        cfrc = np.zeros((state.shape[0], self.ncfrc, 6))
+        xpos = np.zeros((len(state), len(self.body_ids), 3))
+        cfrc = np.zeros((len(state), self.ncfrc, 6))
         skip = self.task.frame_skip
-        pool = _pool()
-        if state[rows].shape[0]:
+        if rows.any():
+            live, live_ctrl = state[rows], ctrl[rows]
+            pool = _pool()
             with pool.lock:
-                live, live_ctrl = state[rows], ctrl[rows]
                 states, _ = pool.rollout.rollout(
                     self.model, self.datas, live, live_ctrl, nstep=skip
                 )
