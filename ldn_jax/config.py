@@ -127,12 +127,12 @@ class AgentConfig:
     activation: str = "relu6"
     """Hidden activation of actor and critic."""
     init_std: float = 0.1
-    """Standard deviation of the normal weight initialiser (biases start at zero)."""
+    """Standard deviation of the normal weight initialiser."""
     init: str = "normal"
     """How actor and critic weights start, one of `INITS`: "normal", a normal of `init_std`
     in every layer (the tutorial code's); "fan_in", uniform in +-1/sqrt(fan_in), PyTorch's
-    default for a linear layer and so SB3's PPO without its orthogonal init (biases start at
-    zero in both)."""
+    default for a linear layer's weights, biases at zero; "torch", PyTorch's default in full,
+    biases uniform in +-1/sqrt(fan_in) too (SB3's PPO without its orthogonal init)."""
     normalize_obs: bool = False
     """Actor and critic see observations standardised by the running mean and variance of
     the real observations seen so far, clipped to +-10 standard deviations (`OBS_CLIP` in

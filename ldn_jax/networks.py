@@ -34,14 +34,14 @@ def normal_init(std: float):
     return init
 
 
-INITS = ("normal", "fan_in")
-"""Weight initialisers of the actor-critic's MLPs (`AgentConfig.init`)."""
+INITS = ("normal", "fan_in", "torch")
+"""Initialisers of the actor-critic's MLPs (`AgentConfig.init`)."""
 
 
 def kernel_init(init: str, std: float):
-    """ "normal": `normal_init(std)`; "fan_in": uniform in +-1/sqrt(fan_in) (PyTorch's
-    `nn.Linear` default, kaiming-uniform with a = sqrt(5))."""
-    if init == "fan_in":
+    """ "normal": `normal_init(std)`; "fan_in" and "torch": uniform in +-1/sqrt(fan_in)
+    (PyTorch's `nn.Linear` default, kaiming-uniform with a = sqrt(5))."""
+    if init in ("fan_in", "torch"):
 
         def uniform(key: Array, shape, dtype=jnp.float32) -> Array:
             # the barrier as in `normal_init`: the same weights jitted as eagerly
@@ -50,6 +50,19 @@ def kernel_init(init: str, std: float):
 
         return uniform
     return normal_init(std)
+
+
+def bias_init(init: str, fan_in: int):
+    """Zero, except under "torch": uniform in +-1/sqrt(fan_in), as `nn.Linear` starts its
+    biases."""
+    if init != "torch":
+        return nn.initializers.zeros
+
+    def uniform(key: Array, shape, dtype=jnp.float32) -> Array:
+        sample = jax.lax.optimization_barrier(jax.random.uniform(key, shape, dtype, -1, 1))
+        return sample * jnp.asarray(1.0 / fan_in**0.5, dtype)
+
+    return uniform
 
 
 @jax.custom_vjp
@@ -111,7 +124,12 @@ class MLP(nn.Module):
     @nn.compact
     def __call__(self, x: Array) -> Array:
         init = kernel_init(self.weight_init, self.init_std)
-        dense = lambda size: nn.Dense(size, kernel_init=init, dot_general=dense_dot_general)
+        dense = lambda size: nn.Dense(
+            size,
+            kernel_init=init,
+            bias_init=bias_init(self.weight_init, x.shape[-1]),
+            dot_general=dense_dot_general,
+        )
         for _ in range(self.layers):
             x = ACTIVATIONS[self.activation](dense(self.hidden)(x))
         return dense(self.out)(x)

@@ -345,7 +345,7 @@ def test_log_std_init_is_refused_for_discrete_actions():
 
 
 def test_an_unknown_initialiser_is_refused():
-    with pytest.raises(ValueError, match="init must be one of normal, fan_in"):
+    with pytest.raises(ValueError, match="init must be one of normal, fan_in, torch"):
         validate(from_preset("paper", env="cartpole-v1", algo="a2c", agent={"init": "xavier"}))
 
 

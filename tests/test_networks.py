@@ -54,7 +54,7 @@ def test_mlp_computes_and_differentiates_as_jax_does(inputs, hidden, out):
             np.testing.assert_allclose(a[i], b, rtol=1e-5, atol=1e-6)
 
 
-@pytest.mark.parametrize("weight_init", ["normal", "fan_in"])
+@pytest.mark.parametrize("weight_init", ["normal", "fan_in", "torch"])
 def test_the_initialisers_give_their_spread_and_the_same_weights_under_jit(weight_init):
     net = MLP(256, 6, "relu", 0.1, layers=2, weight_init=weight_init)
     init = lambda key: net.init(key, jnp.zeros((1, 17)))
@@ -65,10 +65,15 @@ def test_the_initialisers_give_their_spread_and_the_same_weights_under_jit(weigh
     kernels = [layer["kernel"] for layer in params["params"].values()]
     assert [k.shape for k in kernels] == [(17, 256), (256, 256), (256, 6)]
     for kernel in kernels:
-        if weight_init == "fan_in":  # PyTorch's nn.Linear: U(+-1/sqrt(fan_in)), std bound/sqrt(3)
+        if weight_init != "normal":  # PyTorch's nn.Linear: U(+-1/sqrt(fan_in)), std bound/sqrt(3)
             bound = kernel.shape[0] ** -0.5
             assert np.abs(kernel).max() <= bound and np.abs(kernel).max() > 0.95 * bound
             np.testing.assert_allclose(kernel.std(), bound / np.sqrt(3), rtol=0.1)
         else:
             np.testing.assert_allclose(kernel.std(), 0.1, rtol=0.1)
-    assert all(not np.any(layer["bias"]) for layer in params["params"].values())
+    for layer, fan_in in zip(params["params"].values(), (17, 256, 256), strict=True):
+        if weight_init == "torch":  # PyTorch's biases: U(+-1/sqrt(fan_in)) too
+            assert np.abs(layer["bias"]).max() <= fan_in**-0.5
+            np.testing.assert_allclose(layer["bias"].std(), fan_in**-0.5 / np.sqrt(3), rtol=0.5)
+        else:
+            assert not np.any(layer["bias"])
