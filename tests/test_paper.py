@@ -224,7 +224,9 @@ def test_a_finished_mujoco_run_leaves_a_record_that_stands_in_for_its_directory(
     assert trained == [other]
 
 
-def test_the_plan_says_where_each_mujoco_run_stands_without_training(smoke, tmp_path, monkeypatch):
+def test_the_plan_says_where_each_mujoco_run_stands_without_training(
+    smoke, tmp_path, monkeypatch, capsys
+):
     from experiments.paper import plan
 
     results, _ = smoke
@@ -269,6 +271,22 @@ def test_the_plan_says_where_each_mujoco_run_stands_without_training(smoke, tmp_
     monkeypatch.setattr(cache, "ensure_run", lambda config, out: trained.append(out.name))
     plan.main(["--smoke", "--results", str(tmp_path), "--train"])
     assert trained == ["inverted_pendulum-ppo-model", "inverted_pendulum-ppo-ldn"]
+    # a run another process trains is passed over (its lock held), untouched, and the
+    # next is trained
+    monkeypatch.undo()
+    trained.clear()
+
+    def train(config, out, **kwargs):
+        trained.append(out.name)
+        raise KeyboardInterrupt  # the test needs no more than the call
+
+    monkeypatch.setattr(cache, "train", train)
+    before = sorted(p.name for p in cut.rglob("*"))
+    with RunDir(cut).hold(), pytest.raises(KeyboardInterrupt):
+        plan.main(["--smoke", "--results", str(tmp_path), "--train"])
+    assert trained == ["inverted_pendulum-ppo-ldn"]
+    assert sorted(p.name for p in cut.rglob("*")) == before
+    assert "passed over:" in capsys.readouterr().out
 
 
 def test_smoke_readings_and_stopping_rules(smoke):

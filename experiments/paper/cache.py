@@ -26,7 +26,7 @@ from experiments.paper.common import (
 )
 from ldn_jax import envs
 from ldn_jax.config import Config
-from ldn_jax.host.run_dir import RunDir
+from ldn_jax.host.run_dir import LOCK_FILE, RunDir
 from ldn_jax.host.training import train
 
 
@@ -60,30 +60,43 @@ def ensure_run(config: Config, out: Path) -> dict:
     """The summary of the run of `config` in `out`: reused if finished, resumed if it was
     interrupted, trained from scratch otherwise (a run of another config there is replaced).
     A MuJoCo run is also reused from its record (`record_of`) when its directory is gone, and
-    leaves one once finished."""
+    leaves one once finished. Holds the directory's lock while it looks and trains:
+    `RunDirBusy` if another process (another study, a second `plan --train`) trains there."""
     run = RunDir(out)
-    if run.holds_run():
-        if _same_config(json.loads(run.config_file.read_text()), config):
-            if run.is_finished():
-                _keep_record(config, out)
-                return run.read_summary()
-            print(f"resuming {out}", flush=True)
-            summary = train(config, out, checkpoint_every=10, quiet=True, resume=True)
-            _keep_record(config, out)
-            return summary
-        shutil.rmtree(out)
-    elif (summary := _recorded_summary(config, out)) is not None:
+    if not run.holds_run() and (summary := _recorded_summary(config, out)) is not None:
         print(f"reusing the record {record_of(out)}", flush=True)
         return summary
     out.mkdir(parents=True, exist_ok=True)
-    print(f"training {config.env} {config.algo} K={config.k} -> {out}", flush=True)
-    summary = train(config, out, checkpoint_every=10, quiet=True)
-    print(
-        f"  done: train {summary['train_seconds']:.0f}s, compile {summary['compile_seconds']:.0f}s",
-        flush=True,
-    )
-    _keep_record(config, out)
-    return summary
+    with run.hold():
+        resume = run.holds_run() and _same_config(json.loads(run.config_file.read_text()), config)
+        if resume and run.is_finished():
+            _keep_record(config, out)
+            return run.read_summary()
+        if resume:
+            print(f"resuming {out}", flush=True)
+        else:
+            _clear(out)  # a run of another config, or nothing
+            print(f"training {config.env} {config.algo} K={config.k} -> {out}", flush=True)
+        summary = train(config, out, checkpoint_every=10, quiet=True, resume=resume)
+        if not resume:
+            print(
+                f"  done: train {summary['train_seconds']:.0f}s, "
+                f"compile {summary['compile_seconds']:.0f}s",
+                flush=True,
+            )
+        _keep_record(config, out)
+        return summary
+
+
+def _clear(out: Path) -> None:
+    """Remove everything in `out` but the lock file its caller holds."""
+    for child in out.iterdir():
+        if child.name == LOCK_FILE:
+            continue
+        if child.is_dir() and not child.is_symlink():
+            shutil.rmtree(child)
+        else:
+            child.unlink()
 
 
 def progress(config: Config, out: Path) -> dict:

@@ -11,7 +11,9 @@ that ran them. `--scale cpu-full` is many hours on 2 cores: this says how far it
 `--train` trains the runs that are not finished, in the order listed (Tables 4 and 5 before
 Figure 9's three K per task), each leaving its record, and writes no result file: the
 results in DIR stay those of the scale that made them until `make paper SCALE=...` rebuilds
-them from the finished runs, in seconds once all are there. Stopped, it resumes.
+them from the finished runs, in seconds once all are there. Stopped, it resumes. A run that
+another process is training (its directory's lock is held) is passed over, so on a machine
+with cores to spare two `--train` processes share the list.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from rich.console import Console
 from rich.table import Table
 
 from experiments.paper import cache, common, figure9, table4, table5
+from ldn_jax.host.run_dir import RunDirBusy
 
 
 def runs(scale: common.Scale) -> list[tuple[str, str, str, tuple[float, ...]]]:
@@ -68,11 +71,15 @@ def summary(table: list[dict]) -> str:
 
 
 def train(scale: common.Scale, results) -> None:
-    """Train every run of `rows` that is not finished, in order (records left behind)."""
+    """Train every run of `rows` that is not finished, in order (records left behind). A run
+    another process is training is passed over, so two of these can share the list."""
     for row in rows(scale, results):
         if row["state"] in ("partial", "new"):
             config = common.run_config(scale, row["env"], row["algo"], row["k"])
-            cache.ensure_run(config, row["dir"])
+            try:
+                cache.ensure_run(config, row["dir"])
+            except RunDirBusy as busy:
+                print(f"passed over: {busy}", flush=True)
 
 
 def main(argv: list[str] | None = None) -> int:
