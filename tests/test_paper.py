@@ -155,6 +155,25 @@ def test_make_paper_answers_help_and_bad_flags_before_any_script_runs(capsys):
     assert "Every paper script in order" in out and "== table2" not in out
 
 
+def test_make_paper_stops_with_one_line_at_a_run_another_process_trains(
+    tmp_path, monkeypatch, capsys
+):
+    from experiments.paper import all as every
+    from experiments.paper import table2
+
+    config = from_preset("paper", env="cartpole-v0", algo="a2c", seeds=1, episodes=2)
+    out = tmp_path / "runs" / "smoke" / "cartpole-v0-a2c"
+    out.mkdir(parents=True)
+    monkeypatch.setattr(cache, "train", lambda *a, **k: pytest.fail("trained"))
+    monkeypatch.setattr(table2, "main", lambda argv: cache.ensure_run(config, out))
+    with RunDir(out).hold():
+        assert every.main(["--smoke", "--results", str(tmp_path)]) == 2
+    error = capsys.readouterr().err.strip()
+    assert error.startswith("error: ") and "in use by another training process" in error
+    assert "\n" not in error
+    assert [p.name for p in out.iterdir()] == [".lock"]  # nothing written there
+
+
 def _json(results: Path, name: str) -> dict:
     return json.loads((results / name / f"{name}.json").read_text())
 

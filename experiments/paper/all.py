@@ -26,6 +26,7 @@ from experiments.paper import (
     table5,
     targets,
 )
+from ldn_jax.host.run_dir import RunDirBusy
 
 SCRIPTS = (
     table2,
@@ -49,7 +50,11 @@ def main(argv: list[str] | None = None) -> int:
         name = script.__name__.rsplit(".", 1)[-1]
         start = time.perf_counter()
         print(f"== {name}", flush=True)
-        status = script.main(argv)
+        try:
+            status = script.main(argv)
+        except RunDirBusy as busy:  # `plan --train` or a study is training one of its runs
+            print(f"error: {busy}", file=sys.stderr)
+            return 2
         print(f"== {name}: {time.perf_counter() - start:.0f}s", flush=True)
         if status:
             return status
