@@ -42,27 +42,25 @@ def kernel_init(init: str, std: float):
     """ "normal": `normal_init(std)`; "fan_in" and "torch": uniform in +-1/sqrt(fan_in)
     (PyTorch's `nn.Linear` default, kaiming-uniform with a = sqrt(5))."""
     if init in ("fan_in", "torch"):
-
-        def uniform(key: Array, shape, dtype=jnp.float32) -> Array:
-            # the barrier as in `normal_init`: the same weights jitted as eagerly
-            sample = jax.lax.optimization_barrier(jax.random.uniform(key, shape, dtype, -1, 1))
-            return sample * jnp.asarray(1.0 / shape[0] ** 0.5, dtype)
-
-        return uniform
+        return _uniform(lambda shape: shape[0])
     return normal_init(std)
 
 
 def bias_init(init: str, fan_in: int):
     """Zero, except under "torch": uniform in +-1/sqrt(fan_in), as `nn.Linear` starts its
     biases."""
-    if init != "torch":
-        return nn.initializers.zeros
+    return _uniform(lambda shape: fan_in) if init == "torch" else nn.initializers.zeros
 
-    def uniform(key: Array, shape, dtype=jnp.float32) -> Array:
+
+def _uniform(fan_in_of: Callable[[tuple], int]):
+    """Uniform in +-1/sqrt(fan_in), the fan-in read from the parameter's shape."""
+
+    def init(key: Array, shape, dtype=jnp.float32) -> Array:
+        # the barrier as in `normal_init`: the same weights jitted as eagerly
         sample = jax.lax.optimization_barrier(jax.random.uniform(key, shape, dtype, -1, 1))
-        return sample * jnp.asarray(1.0 / fan_in**0.5, dtype)
+        return sample * jnp.asarray(1.0 / fan_in_of(shape) ** 0.5, dtype)
 
-    return uniform
+    return init
 
 
 @jax.custom_vjp
@@ -124,7 +122,7 @@ class MLP(nn.Module):
     @nn.compact
     def __call__(self, x: Array) -> Array:
         init = kernel_init(self.weight_init, self.init_std)
-        dense = lambda size: nn.Dense(
+        dense = lambda size: nn.Dense(  # called on the current `x`: its width is the fan-in
             size,
             kernel_init=init,
             bias_init=bias_init(self.weight_init, x.shape[-1]),
