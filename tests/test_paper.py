@@ -183,11 +183,11 @@ _SMOKE_RUNS = [
     "cartpole-v0-a2c-model",
     "cartpole-v0-ldn",
     "cartpole-v0-ldn-ensemble",
-    "cartpole-v0-ldn-k0.5,1,2",
+    "cartpole-v0-ldn-k0.5,2",
     "inverted_pendulum-a2c",
     "inverted_pendulum-a2c-model",
     "inverted_pendulum-ldn",
-    "inverted_pendulum-ldn-k0.5,1,2",
+    "inverted_pendulum-ldn-k0.5,2",
     "inverted_pendulum-ppo",
     "inverted_pendulum-ppo-ldn",
     "inverted_pendulum-ppo-model",
@@ -198,7 +198,8 @@ _SMOKE_RUNS = [
 
 def test_smoke_trains_each_run_once_and_reuses_it(smoke):
     results, stdout = smoke
-    # Table 2's three runs, Figure 9's two (CartPole and inverted_pendulum), the calibration's
+    # Table 2's three runs, Figure 9's two of K = 0.5 and 2 (CartPole and inverted_pendulum:
+    # K = 1 is Table 2's and Table 4's run), the calibration's
     # ensemble-LD run, the stopping-rule study's two (m2ac and the oracle), Table 4's two,
     # Table 5's three and the targets' a2c; the other scripts reuse them.
     assert stdout.count("training ") == 14, stdout
@@ -385,6 +386,10 @@ def test_smoke_figure9_has_a_panel_per_env(smoke):
             assert len(row["episodes_to_threshold"]) == len(row["final_moving_returns"]) == 2
             assert row["final_moving_return"]["runs"] == 2
     assert all(r["reached"] == 0 for r in pendulum["rows"])  # no threshold, none reached
+    table4 = _json(results, "table4")
+    ldn = next(r for r in table4["rows"] if r["env"] == "inverted_pendulum" and r["algo"] == "ldn")
+    assert pendulum["shared_k"] == [1.0]  # K = 1 is Table 4's run, not trained again
+    assert pendulum["rows"][1]["final_moving_returns"] == ldn["final_moving_returns"]
     with open(results / "figure9" / "figure9.csv") as f:
         assert len(list(csv.DictReader(f))) == 6
     assert (results / "figure9" / "figure9.png").stat().st_size > 1000

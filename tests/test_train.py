@@ -307,6 +307,20 @@ def test_vmapped_seeds_equal_seeds_run_one_by_one():
                 )
 
 
+@pytest.mark.optimized
+def test_a_k_of_a_vmapped_run_equals_a_run_of_that_k_alone():
+    # Figure 9 reads K = 1 from Table 4's run and K = 0.5, 2 from a run of its own: each K's
+    # lanes are those of one vmapped run (float32 rounding apart, as for seeds above).
+    _, both = _run_chunks(Trainer(_config(k=(0.5, 1.0))), None)
+    _, alone = _run_chunks(Trainer(_config(k=(1.0,))), None)
+    for pair, single in zip(both, alone, strict=True):
+        for name in single:
+            np.testing.assert_allclose(
+                single[name][0], pair[name][1], rtol=1e-5, atol=1e-6, err_msg=name
+            )
+        assert not np.array_equal(pair["ld_mean"][0], pair["ld_mean"][1])  # K matters
+
+
 def test_first_seed_starts_what_the_same_seeds_of_a_larger_batch_start():
     """Seeds 2 and 3 alone (`first_seed` 2) start from the states of seeds 2 and 3 of a batch
     of 0..3, keys included, so they train the same (each seed's training reads its own state

@@ -1,6 +1,8 @@
-"""Figure 9: the learning-degree gain K in {0.5, 1, 2} (eq. 6) for MBRL-LDN, one vmapped run
-per env (every K shares the seeds' initialisations): cartpole-v2, and the six MuJoCo tasks
-(the CPU scale at short budgets).
+"""Figure 9: the learning-degree gain K in {0.5, 1, 2} (eq. 6) for MBRL-LDN on cartpole-v2
+and the six MuJoCo tasks (the CPU scale at short budgets). Per env, K = 1 is the MBRL-LDN run
+the other results read (Table 4's on MuJoCo, Table 2's and Figure 5's on CartPole: the same
+config, trained once), and K = 0.5 and 2 are one vmapped run of their own. Seed s starts from
+key s at every K, so the three K share their initialisations as in one vmapped run.
 
     python -m experiments.paper.figure9 [--scale cpu|cpu-full|paper] [--smoke] [--results DIR]
 
@@ -20,57 +22,65 @@ import numpy as np
 from experiments.paper import cache, common
 from ldn_jax.host.plots import band_panel
 
-K_VALUES = (0.5, 1.0, 2.0)
+PARTS = ((1.0,), (0.5, 2.0))
+"""The runs Figure 9 reads per env: K = 1, shared with the other results, then its own."""
 LISTS = ("k", "final_moving_return", "episodes_to_threshold", "final_moving_returns")
 """Row fields left out of figure9.csv (per-seed lists, and what the CSV spells apart)."""
 
 
-def rows(entry: dict) -> list[dict]:
-    history = cache.load_history(entry["dir"])
+def rows(entries: list[dict]) -> list[dict]:
+    """One row per K, in K order, from the env's runs (`PARTS`)."""
     out = []
-    for ki, k in enumerate(entry["config"].k):
-        runs = [r for r in entry["summary"]["runs"] if r["k"] == k]
-        episodes = [r["episodes_to_threshold"] for r in runs]
-        final = [r["final_moving_return"] for r in runs]
-        out.append(
-            {
-                "k": k,
-                **common.describe(episodes),
-                "final_moving_return": common.describe(final),
-                "final_moving_return_mean": float(np.nanmean(history["moving_return"][ki, :, -1])),
-                "imagined_steps_per_seed": float(history["imagined_steps"][ki, :, -1].mean()),
-                "ld_mean_last_iterations": float(np.nanmean(history["ld_mean"][ki, :, -10:])),
-                "episodes_to_threshold": episodes,
-                "final_moving_returns": final,
-            }
-        )
-    return out
+    for entry in entries:
+        history = cache.load_history(entry["dir"])
+        for ki, k in enumerate(entry["config"].k):
+            runs = [r for r in entry["summary"]["runs"] if r["k"] == k]
+            episodes = [r["episodes_to_threshold"] for r in runs]
+            final = [r["final_moving_return"] for r in runs]
+            moving = history["moving_return"][ki, :, -1]
+            out.append(
+                {
+                    "k": k,
+                    **common.describe(episodes),
+                    "final_moving_return": common.describe(final),
+                    "final_moving_return_mean": float(np.nanmean(moving)),
+                    "imagined_steps_per_seed": float(history["imagined_steps"][ki, :, -1].mean()),
+                    "ld_mean_last_iterations": float(np.nanmean(history["ld_mean"][ki, :, -10:])),
+                    "episodes_to_threshold": episodes,
+                    "final_moving_returns": final,
+                }
+            )
+    return sorted(out, key=lambda row: row["k"])
 
 
-def panel(entry: dict) -> dict:
+def panel(entries: list[dict]) -> dict:
+    """The env's panel. Its seconds are those of its own run: the K = 1 run is counted with
+    the result it is shared with (Table 4 on MuJoCo)."""
+    shared, own = entries
     return {
-        "env": entry["env"],
-        "seeds": entry["config"].seeds,
-        "episodes": entry["config"].episodes,
-        "steps": entry["config"].steps,
-        "budget": cache.budget_text(entry["config"]),
-        "train_seconds": entry["summary"]["train_seconds"],
-        "compile_seconds": entry["summary"]["compile_seconds"],
-        "threshold": entry["summary"]["threshold"],
-        "rows": rows(entry),
+        "env": own["env"],
+        "seeds": own["config"].seeds,
+        "episodes": own["config"].episodes,
+        "steps": own["config"].steps,
+        "budget": cache.budget_text(own["config"]),
+        "train_seconds": own["summary"]["train_seconds"],
+        "compile_seconds": own["summary"]["compile_seconds"],
+        "shared_k": list(shared["config"].k),
+        "threshold": own["summary"]["threshold"],
+        "rows": rows(entries),
     }
 
 
-def figure(entries: list[dict], panels: list[dict], path: Path) -> None:
+def figure(envs: list[list[dict]], panels: list[dict], path: Path) -> None:
     fig, axes = plt.subplots(len(panels), 2, figsize=(11, 4 * len(panels)), dpi=120, squeeze=False)
-    for (left, right), entry, data in zip(axes, entries, panels, strict=True):
-        history = cache.load_history(entry["dir"])
-        episodes = history["episodes"][0, 0]
+    for (left, right), entries, data in zip(axes, envs, panels, strict=True):
         threshold = data["threshold"]
-        curves = {
-            f"K={row['k']:g}": (episodes, history["moving_return"][ki])
-            for ki, row in enumerate(data["rows"])
-        }
+        curves = {}
+        for entry in entries:
+            history = cache.load_history(entry["dir"])
+            for ki, k in enumerate(entry["config"].k):
+                curves[k] = (history["episodes"][ki, 0], history["moving_return"][ki])
+        curves = {f"K={k:g}": curves[k] for k in sorted(curves)}
         title = f"MBRL-LDN on {data['env']} ({data['seeds']} seeds, mean and 95% band)"
         band_panel(left, curves, title, threshold)
         for ki, row in enumerate(data["rows"]):
@@ -94,12 +104,15 @@ def figure(entries: list[dict], panels: list[dict], path: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     scale, results = common.parse_args(argv, __doc__)
-    entries = []
+    done, pending = [], []
     for env in (scale.ld_env, *scale.ablation_envs):
-        entries += cache.collect_runs((env,), ("ldn",), scale, results, k=K_VALUES)
-    done = [e for e in entries if e["status"] == "done"]
-    panels = [panel(e) for e in done]
-    pending = [{"env": e["env"], "reason": e["reason"]} for e in entries if e not in done]
+        entries = [cache.collect_runs((env,), ("ldn",), scale, results, k=k)[0] for k in PARTS]
+        stopped = [e for e in entries if e["status"] != "done"]
+        if stopped:
+            pending.append({"env": env, "reason": stopped[0]["reason"]})
+        else:
+            done.append(entries)
+    panels = [panel(entries) for entries in done]
     out = common.out_dir(results, "figure9")
     record = {**common.scale_record(scale), "algo": "ldn", "panels": panels, "pending": pending}
     common.write_json(out / "figure9.json", record)

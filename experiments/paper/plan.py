@@ -9,7 +9,7 @@ scratch). Seconds are the finished runs' training and compile, as measured on th
 that ran them. `--scale cpu-full` is many hours on 2 cores: this says how far it has come.
 
 `--train` trains the runs that are not finished, in the order listed (Tables 4 and 5 before
-Figure 9's three K per task), each leaving its record, and writes no result file: the
+Figure 9's runs), each leaving its record, and writes no result file: the
 results in DIR stay those of the scale that made them until `make paper SCALE=...` rebuilds
 them from the finished runs, in seconds once all are there. Stopped, it resumes. A run that
 another process is training (its directory's lock is held) is passed over, so on a machine
@@ -29,10 +29,10 @@ from ldn_jax.host.run_dir import RunDirBusy
 
 def runs(scale: common.Scale) -> list[tuple[str, str, str, tuple[float, ...]]]:
     """(result, env, algo, K) of every MuJoCo run the scale's tables and figure read: Tables
-    4 and 5, then Figure 9 (its runs cost three K each)."""
+    4 and 5, then Figure 9's K = 0.5 and 2 (two K per run; its K = 1 is Table 4's run)."""
     out = [("table4", env, algo, (1.0,)) for env in table4.ENVS for algo in table4.ALGOS]
     out += [("table5", env, algo, (1.0,)) for env in table5.ENVS for algo in table5.ALGOS]
-    out += [("figure9", env, "ldn", figure9.K_VALUES) for env in scale.ablation_envs]
+    out += [("figure9", env, "ldn", figure9.PARTS[-1]) for env in scale.ablation_envs]
     return [run for run in out if run[1] in common.MUJOCO]
 
 

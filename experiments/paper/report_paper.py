@@ -236,8 +236,9 @@ def figure5_section(data: dict) -> Section:
 
 def figure9_section(data: dict) -> Section:
     intro = (
-        "MBRL-LDN with K in {0.5, 1, 2}, one vmapped run per env (the same initialisations for "
-        "every K). ![figure 9](figure9/figure9.png)"
+        "MBRL-LDN with K in {0.5, 1, 2} per env: K = 1 is the MBRL-LDN run the other results "
+        "read (the same config, trained once), K = 0.5 and 2 one vmapped run; seed s starts "
+        "from the same initialisation at every K. ![figure 9](figure9/figure9.png)"
     )
     section = Section(TITLES["figure9"], [intro])
     for panel in data["panels"]:
