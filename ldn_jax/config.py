@@ -135,10 +135,12 @@ class AgentConfig:
     biases uniform in +-1/sqrt(fan_in) too (SB3's PPO without its orthogonal init)."""
     normalize_obs: bool = False
     """Actor and critic see observations standardised by the running mean and variance of
-    the real observations seen so far, clipped to +-10 standard deviations (`OBS_CLIP` in
-    `ldn_jax.learners.base`), as SB3's VecNormalize does. The statistics live in the
-    parameters (`params["obs_norm"]`), so a saved policy carries them; imagined observations
-    do not move them."""
+    the real observations seen so far, clipped to +-`obs_clip` standard deviations, as SB3's
+    VecNormalize does. The statistics live in the parameters (`params["obs_norm"]`), so a
+    saved policy carries them; imagined observations do not move them."""
+    obs_clip: float = 10.0
+    """Under `normalize_obs`, standardised observations are clipped to +-this (SB3's
+    VecNormalize default, 10)."""
     normalize_reward: bool = False
     """The learner trains on the reward divided by the running standard deviation of each
     real worker's discounted return (discounted by `gamma`, reset at each episode's end),
@@ -828,6 +830,7 @@ def validate(config: Config) -> Config:
         ),
         (agent.init_std > 0, f"agent init_std must be > 0, got {agent.init_std}"),
         (agent.min_std > 0, f"min_std must be > 0, got {agent.min_std}"),
+        (agent.obs_clip > 0, f"obs_clip must be > 0, got {agent.obs_clip}"),
         (agent.entropy_beta >= 0, f"entropy_beta must be >= 0, got {agent.entropy_beta}"),
         (
             0 <= agent.rmsprop_decay < 1,

@@ -88,6 +88,7 @@ def test_set_over_the_presets_and_per_learner_defaults():
         (["--set", "agent.gamma=2"], "gamma must be in (0, 1], got 2.0"),
         (["--set", "model.lr=-1"], "model lr must be > 0"),
         (["--algo", "ppo", "--set", "agent.target_kl=0"], "target_kl must be > 0 (or None"),
+        (["--algo", "ppo", "--set", "agent.obs_clip=0"], "obs_clip must be > 0, got 0"),
         (["--set", "actor_lr"], "--set needs FIELD=VALUE"),
         (["--k", "1", "--set", "k=2"], "k is already given by --k 1"),
         (["--steps", "100", "--set", "episodes=3"], "not both (one budget per run)"),

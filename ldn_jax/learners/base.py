@@ -15,8 +15,6 @@ from ldn_jax.networks import MLP
 
 Array = jax.Array
 
-OBS_CLIP = 10.0
-"""Standardised observations are clipped to this many standard deviations (SB3's default)."""
 
 REWARD_CLIP = 10.0
 """Normalised rewards (`AgentConfig.normalize_reward`) are clipped to +-this (SB3's default)."""
@@ -390,7 +388,7 @@ class ActorCritic:
             return obs
         stats = jax.lax.stop_gradient(params["obs_norm"])
         z = (obs - stats["mean"]) / jnp.sqrt(stats["var"] + 1e-8)
-        return jnp.clip(z, -OBS_CLIP, OBS_CLIP)
+        return jnp.clip(z, -self.config.obs_clip, self.config.obs_clip)
 
     def logits(self, params: dict, obs: Array) -> Array:
         """The actor's raw output: logits (discrete) or mean and std pre-activations (the
