@@ -98,7 +98,7 @@ def section(rows: list[dict]) -> str:
             f"| {', '.join(f'{v:,.0f}' for v in r['final_moving_return'])} "
             f"| {stats.text(stats.estimate(r['eval_return']))} "
             f"| {', '.join(f'{v:,.0f}' for v in r['eval_return'])} "
-            f"| {_imagined_text(r)} | {r['diverged']} | {r['wall_seconds']:.0f} |"
+            f"| {_imagined_text(r)} | {r['diverged']} | {r['wall_seconds']:,.0f} |"
         )
     have = {(r["env"], r["algo"]) for r in rows}
     missing = [f"{env} {algo}" for env in ENVS for algo in ALGOS if (env, algo) not in have]

@@ -144,7 +144,7 @@ def section(rows: list[dict], sb3: dict[str, list[dict]] | None = None) -> str:
             f"| {stats.text(stats.estimate(r['eval_return']))} "
             f"| {', '.join(f'{v:,.0f}' for v in r['eval_return'])} "
             f"| {r['zoo']:,.0f} | {r['ratio']:.2f} | {r.get('diverged', 0)} "
-            f"| {r['wall_seconds']:.0f} |"
+            f"| {r['wall_seconds']:,.0f} |"
         )
     met = [r["env"] for r in rows if r["ratio"] >= 1.0]
     missing = [env for env in ZOO if env not in {r["env"] for r in rows}]
