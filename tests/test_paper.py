@@ -611,6 +611,36 @@ def test_an_underpowered_mujoco_comparison_says_inconclusive_with_its_budget():
     assert "NOT reproduced" not in finding
 
 
+def test_a_comparison_whose_interval_includes_even_odds_says_inconclusive_not_refuted():
+    from experiments.paper.report_format import too_wide
+    from experiments.paper.report_mujoco import table5_verdict
+
+    overlap = too_wide([1.0, 5.0, 2.0, 8.0, 3.0], [4.0, 2.5, 6.0, 1.5, 7.0])
+    assert overlap.startswith("inconclusive at 5 seeds (P(better) ") and "includes 0.5" in overlap
+    assert too_wide([10.0, 11.0, 12.0, 13.0, 14.0], [1.0, 2.0, 3.0, 4.0, 5.0]) is None
+
+    def row(tops):
+        reached = [t for t in tops if t is not None]
+        mean = sum(reached) / len(reached) if reached else None
+        return {"episodes_to_top": tops, "mean": mean, "reached": len(reached), "runs": 5}
+
+    fast, slow = [100, 110, 120, 130, 140], [300, 310, 320, 330, 340]
+    mixed, behind = [90, 290, 105, 310, 135], [150, 300, 120, 330, 200]
+    algos = {"ppo": row(slow), "ppo-model": row(slow), "ppo-ldn": row(fast)}
+    assert table5_verdict(algos, True, None) == "REPRODUCED (PPO2-LDN fewest, as in the paper)"
+    algos["ppo"] = row(mixed)  # fewest on the mean, not significantly
+    assert table5_verdict(algos, True, None) == (
+        "PPO2-LDN fewest, as in the paper, but not significantly: inconclusive at 5 seeds "
+        "(no difference significant)"
+    )
+    algos = {"ppo": row(fast), "ppo-model": row(mixed), "ppo-ldn": row(slow)}
+    assert table5_verdict(algos, False, None).startswith("NOT reproduced (PPO2 significantly ")
+    algos = {"ppo": row(mixed), "ppo-model": row(mixed), "ppo-ldn": row(behind)}
+    assert table5_verdict(algos, False, None) == (
+        "inconclusive at 5 seeds (no difference significant) (the paper: PPO2-LDN fewest)"
+    )
+
+
 def test_the_cpu_full_scale_runs_every_mujoco_table_at_1m_steps_with_5_seeds():
     from experiments.paper import common
 

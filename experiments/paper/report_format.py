@@ -128,6 +128,19 @@ def inconclusive(env: str, episodes: float | None = None, steps: float | None = 
     )
 
 
+def too_wide(x: list, y: list, lower_is_better: bool = False) -> str | None:
+    """ "inconclusive at N seeds (...)" where the bootstrap 95% interval of P(X better than Y)
+    includes 0.5: these seeds cannot tell which of the two is better, so a difference the paper
+    reports is neither shown nor ruled out. None where the interval excludes 0.5 (or there is
+    none: fewer than 2 values a side)."""
+    x, y = [v for v in x if v is not None], [v for v in y if v is not None]
+    value = iqm_stats.improvement(x, y, lower_is_better=lower_is_better)
+    if value["ci95"] is None or not value["ci95"][0] <= 0.5 <= value["ci95"][1]:
+        return None
+    seeds = f"{len(x)} seeds" if len(x) == len(y) else f"{len(x)} and {len(y)} seeds"
+    return f"inconclusive at {seeds} (P(better) {iqm_stats.improvement_text(value)} includes 0.5)"
+
+
 def budget(record: dict) -> str:
     """A run's budget per seed as its result file states it (files from before step
     budgets give episodes only)."""
