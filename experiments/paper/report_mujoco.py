@@ -129,7 +129,7 @@ def table5_verdict(algos: dict[str, dict], ldn_fewest: bool, short: str | None) 
         return "REPRODUCED (PPO2-LDN fewest, as in the paper)"
     fewer = [
         a
-        for a, top in others.items()
+        for a in others
         if p[a] is not None and p[a] < 0.05 and algos[a]["mean"] < algos["ppo-ldn"]["mean"]
     ]
     if fewer and not short:
