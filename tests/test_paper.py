@@ -155,22 +155,32 @@ def test_make_paper_answers_help_and_bad_flags_before_any_script_runs(capsys):
     assert "Every paper script in order" in out and "== table2" not in out
 
 
-def test_make_paper_stops_with_one_line_at_a_run_another_process_trains(
+def test_make_paper_and_each_script_stop_with_one_line_at_a_run_another_process_trains(
     tmp_path, monkeypatch, capsys
 ):
     from experiments.paper import all as every
-    from experiments.paper import table2
+    from experiments.paper import common, table2
 
     config = from_preset("paper", env="cartpole-v0", algo="a2c", seeds=1, episodes=2)
-    out = tmp_path / "runs" / "smoke" / "cartpole-v0-a2c"
+    out = tmp_path / "runs" / "smoke" / "cartpole-v0-a2c"  # table2's first run at the smoke scale
     out.mkdir(parents=True)
-    monkeypatch.setattr(cache, "train", lambda *a, **k: pytest.fail("trained"))
-    monkeypatch.setattr(table2, "main", lambda argv: cache.ensure_run(config, out))
     with RunDir(out).hold():
-        assert every.main(["--smoke", "--results", str(tmp_path)]) == 2
-    error = capsys.readouterr().err.strip()
-    assert error.startswith("error: ") and "in use by another training process" in error
-    assert "\n" not in error
+        script = [sys.executable, "-m", "experiments.paper.table2", "--smoke"]
+        alone = subprocess.run(
+            [*script, "--results", str(tmp_path)],
+            capture_output=True,
+            text=True,
+            timeout=300,
+            cwd=ROOT,
+        )
+        monkeypatch.setattr(cache, "train", lambda *a, **k: pytest.fail("trained"))
+        monkeypatch.setattr(table2, "main", lambda argv: cache.ensure_run(config, out))
+        paper = ["--smoke", "--results", str(tmp_path)]
+        assert common.script(lambda argv: every.main(paper)) == 2
+    assert alone.returncode == 2, alone.stderr[-2000:]
+    for error in (alone.stderr.strip(), capsys.readouterr().err.strip()):
+        assert error.startswith("error: ") and "in use by another training process" in error
+        assert "\n" not in error
     assert [p.name for p in out.iterdir()] == [".lock"]  # nothing written there
 
 

@@ -26,7 +26,6 @@ from experiments.paper import (
     table5,
     targets,
 )
-from ldn_jax.host.run_dir import RunDirBusy
 
 SCRIPTS = (
     table2,
@@ -50,11 +49,7 @@ def main(argv: list[str] | None = None) -> int:
         name = script.__name__.rsplit(".", 1)[-1]
         start = time.perf_counter()
         print(f"== {name}", flush=True)
-        try:
-            status = script.main(argv)
-        except RunDirBusy as busy:  # `plan --train` or a study is training one of its runs
-            print(f"error: {busy}", file=sys.stderr)
-            return 2
+        status = script.main(argv)  # a busy run stops them all: `common.script` says which
         print(f"== {name}: {time.perf_counter() - start:.0f}s", flush=True)
         if status:
             return status
@@ -62,4 +57,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(common.script(main))

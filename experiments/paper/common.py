@@ -13,7 +13,9 @@ import json
 import math
 import os
 import platform
+import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -21,6 +23,7 @@ import numpy as np
 
 from ldn_jax.config import Config, from_preset, validate
 from ldn_jax.host import stats
+from ldn_jax.host.run_dir import RunDirBusy
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -165,6 +168,16 @@ def parse_args(argv: list[str] | None, description: str) -> tuple[Scale, Path]:
     args = p.parse_args(argv)
     _compile_cache(args.results)
     return SCALES["smoke" if args.smoke else args.scale], args.results
+
+
+def script(main: Callable[[list[str] | None], int]) -> int:
+    """A script's exit status from the command line: a run that another process is training
+    (`plan --train`, a study) stops the script with one line, as `ldn-jax --resume` does."""
+    try:
+        return main(None)
+    except RunDirBusy as busy:
+        print(f"error: {busy}", file=sys.stderr)
+        return 2
 
 
 def _compile_cache(results: Path) -> None:

@@ -227,4 +227,4 @@ def _write(out: Path, record: Path, rows: list[dict], results: Path) -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(common.script(main))
