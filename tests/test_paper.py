@@ -602,6 +602,14 @@ def test_report_is_generated_from_the_result_files(smoke, tmp_path):
     text = report.render(tmp_path, report.common.SCALES["smoke"])
     assert "123.4 ± 5.6" in text
     assert "Not produced yet (run `figure9.py`)" in text
+    assert f"Machine: {table2['machine']['cpu']}, " in text
+    # Result files written on two machines: the setup says which wrote which.
+    table3 = _json(results, "table3")
+    table3["machine"]["cpu"] = "Another CPU"
+    (tmp_path / "table3").mkdir()
+    (tmp_path / "table3" / "table3.json").write_text(json.dumps(table3))
+    text = report.render(tmp_path, report.common.SCALES["smoke"])
+    assert f"{table2['machine']['cpu']} (table2); Another CPU (table3); each with " in text
 
 
 def test_an_underpowered_mujoco_comparison_says_inconclusive_with_its_budget():

@@ -74,7 +74,7 @@ def setup(data: dict, scale: common.Scale) -> Section:
         "(mean ± s.d.) are kept beside them. `ldn-jax compare RUN_DIR ...` prints the same for "
         "any runs.",
         f"MuJoCo (Tables 4 and 5, Figure 9's MuJoCo panels): {mujoco}{mujoco_time(data)}",
-        f"Machine: {machine['cpu']}, {machine['cores']} cores, JAX backend "
+        f"{cpus(data) or 'Machine: ' + machine['cpu'] + ','} {machine['cores']} cores, JAX backend "
         f"{machine['jax_backend']}; jax {machine['jax']}, jaxlib {machine['jaxlib']}, Python "
         f"{machine['python']}; results dated {dated(data) or machine['date']}. The CPU was "
         "shared with other jobs, so seconds are indicative.",
@@ -99,6 +99,22 @@ def dated(data: dict) -> str:
     if len(by_date) < 2:
         return next(iter(by_date), "")
     return ", ".join(f"{date} ({', '.join(names)})" for date, names in sorted(by_date.items()))
+
+
+def cpus(data: dict) -> str:
+    """The setup's machine, up to its cores: "Machine: AMD EPYC,", or where result files were
+    written on several CPUs, which wrote which; "" without files."""
+    by_cpu: dict[str, list[str]] = {}
+    for name, d in data.items():
+        if d and "machine" in d:
+            by_cpu.setdefault(d["machine"]["cpu"], []).append(name)
+    if len(by_cpu) < 2:
+        return f"Machine: {next(iter(by_cpu))}," if by_cpu else ""
+    written = "; ".join(f"{cpu} ({', '.join(names)})" for cpu, names in by_cpu.items())
+    return (
+        "Machines (where each result file was written; a run cached or recorded by an earlier "
+        f"session trained on that session's machine): {written}; each with"
+    )
 
 
 def mujoco_time(data: dict) -> str:
