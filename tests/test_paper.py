@@ -991,3 +991,18 @@ def test_the_branched_studys_figure_draws_from_its_rows_alone(tmp_path):
         [r | {"name": "", "final_moving_return": [0.0] * 3, "late_return": None,
               "imagined_per_real": 0.0, "train_seconds": 1.0} for r in rows[:3]]
     )  # fmt: skip
+
+
+def test_a_curve_whose_seeds_end_at_different_episode_counts_is_drawn_at_their_mean():
+    from ldn_jax.host.plots import band_panel, pyplot
+
+    # Seed 0 reaches its step budget after 2 iterations and holds; seed 1 goes on.
+    episodes = np.array([[8, 16, 16, 16], [8, 16, 24, 32]])
+    returns = np.array([[1.0, 2.0, 2.0, 2.0], [1.0, 2.0, 3.0, 4.0]])
+    plt = pyplot()
+    fig, ax = plt.subplots()
+    band_panel(ax, {"a": (episodes, returns)})
+    x, y = ax.get_lines()[0].get_data()
+    plt.close(fig)
+    np.testing.assert_allclose(x, [8, 16, 20, 24])  # not seed 0's 16, 16: a vertical line
+    np.testing.assert_allclose(y, [1.0, 2.0, 2.5, 3.0])

@@ -305,7 +305,7 @@ def mujoco_curves(
         for entry in runs:
             history = load_history(entry["dir"])
             name = PAPER_ALGOS.get(entry["algo"], entry["algo"])
-            curves[name] = (history["episodes"][0, 0], history["moving_return"][0])
+            curves[name] = (history["episodes"][0], history["moving_return"][0])
         level = levels.get(env) if levels else None
         band_panel(ax, curves, env, level, "the top", legend_size=7)
     fig.suptitle(title, fontsize=10)

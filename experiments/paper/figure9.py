@@ -79,7 +79,7 @@ def figure(envs: list[list[dict]], panels: list[dict], path: Path) -> None:
         for entry in entries:
             history = cache.load_history(entry["dir"])
             for ki, k in enumerate(entry["config"].k):
-                curves[k] = (history["episodes"][ki, 0], history["moving_return"][ki])
+                curves[k] = (history["episodes"][ki], history["moving_return"][ki])
         curves = {f"K={k:g}": curves[k] for k in sorted(curves)}
         title = f"MBRL-LDN on {data['env']} ({data['seeds']} seeds, mean and 95% band)"
         band_panel(left, curves, title, threshold)

@@ -32,9 +32,15 @@ def band_panel(
     legend_size: int = 8,
 ) -> None:
     """The one panel every learning-curve figure draws: per label, moving return vs real
-    episodes, mean and 95% band over seeds (`curves[label] = (episodes [T], returns [S, T])`),
-    and a dashed line at `level` if given."""
+    episodes, mean and 95% band over seeds (`curves[label] = (episodes [S, T] or [T], returns
+    [S, T])`), and a dashed line at `level` if given.
+
+    Per-seed episodes are drawn at their mean over seeds: a seed that reached its step budget
+    early holds its last episode count and return while the others go on, so one seed's count
+    would stand still and draw the others' last iterations as a vertical line."""
     for label, (episodes, returns) in curves.items():
+        episodes = np.asarray(episodes, float)
+        episodes = episodes.mean(axis=0) if episodes.ndim == 2 else episodes
         mean, low, high = mean_band(returns)
         (line,) = ax.plot(episodes, mean, label=f"{label} ({returns.shape[0]} seeds)")
         ax.fill_between(episodes, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
@@ -42,7 +48,7 @@ def band_panel(
         ax.axhline(level, color="grey", linestyle="--", linewidth=1, label=level_label)
     if title is not None:
         ax.set_title(title)
-    ax.set_xlabel("real episodes (summed over workers)")
+    ax.set_xlabel("real episodes (summed over workers; mean over seeds)")
     ax.set_ylabel("moving return")
     ax.grid(alpha=0.3)
     ax.legend(loc="upper left", fontsize=legend_size)
@@ -64,7 +70,8 @@ def learning_curves(
 
 
 def run_curves(run_dir: Path, name: str) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], Config]:
-    """Moving return vs episodes of one run directory: `{label: (episodes [T], returns [S, T])}`
+    """Moving return vs episodes of one run directory: `{label: (episodes [S, T], returns [S,
+    T])}`
     with a label `name: algo K=k` per K (K left out where it does not matter; a sweep's
     values added), and its config.
 
@@ -92,8 +99,7 @@ def run_curves(run_dir: Path, name: str) -> tuple[dict[str, tuple[np.ndarray, np
         iterations = sorted(set.intersection(*(set(logged) for logged in by_seed.values())))
         if not iterations:
             continue
-        any_seed = next(iter(by_seed.values()))
-        episodes = np.array([any_seed[i][0] for i in iterations])
+        episodes = np.array([[logged[i][0] for i in iterations] for logged in by_seed.values()])
         returns = np.array([[logged[i][1] for i in iterations] for logged in by_seed.values()])
         label = f"{name}: {config.algo}" + (f" K={k:g}" if show_k else "")
         label += "".join(f" {field}={value:g}" for field, value in sweep)
