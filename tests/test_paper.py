@@ -629,6 +629,40 @@ def test_an_underpowered_mujoco_comparison_says_inconclusive_with_its_budget():
     assert "NOT reproduced" not in finding
 
 
+def test_figure_9s_verdict_says_its_power():
+    from experiments.paper.report_paper import figure9_findings
+
+    def panel(env, finals, episodes):
+        rows = [
+            {"k": k, "runs": 5, "episodes_per_seed": episodes,
+             "final_moving_return": {"mean": sum(v) / len(v)}, "final_moving_returns": v}
+            for k, v in finals.items()
+        ]  # fmt: skip
+        return {"env": env, "threshold": None, "rows": rows}
+
+    high, low = [900, 910, 920, 930, 940], [100, 110, 120, 130, 140]
+    mixed = [880, 150, 930, 120, 950]
+
+    def verdict(p):
+        (finding,) = figure9_findings(p)
+        return finding
+
+    assert verdict(panel("hopper", {0.5: low, 1.0: high, 2.0: low}, 2_000)).endswith(
+        ": REPRODUCED (K = 1 best, as in the paper)."
+    )
+    assert verdict(panel("hopper", {0.5: mixed, 1.0: high, 2.0: low}, 2_000)).endswith(
+        ": K = 1 best, as in the paper, but not significantly: inconclusive at 5 seeds (no "
+        "difference significant)."
+    )
+    assert verdict(panel("hopper", {0.5: low, 1.0: low, 2.0: high}, 2_000)).endswith(
+        ": NOT reproduced (K=2 significantly better; the paper: K = 1 best)."
+    )
+    # Below the paper's episodes, a reversal is not a refutation.
+    below = verdict(panel("hopper", {0.5: low, 1.0: low, 2.0: high}, 1_000))
+    assert "inconclusive at this budget (1,000 episodes per seed, 58% " in below
+    assert "NOT reproduced" not in below
+
+
 def test_a_comparison_whose_interval_includes_even_odds_says_inconclusive_not_refuted():
     from experiments.paper.report_format import too_wide
     from experiments.paper.report_mujoco import table5_verdict

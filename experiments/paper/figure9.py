@@ -44,6 +44,7 @@ def rows(entries: list[dict]) -> list[dict]:
                     **common.describe(episodes),
                     "final_moving_return": common.describe(final),
                     "final_moving_return_mean": float(np.nanmean(moving)),
+                    "episodes_per_seed": float(history["episodes"][ki, :, -1].mean()),
                     "imagined_steps_per_seed": float(history["imagined_steps"][ki, :, -1].mean()),
                     "ld_mean_last_iterations": float(np.nanmean(history["ld_mean"][ki, :, -10:])),
                     "episodes_to_threshold": episodes,

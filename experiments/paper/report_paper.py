@@ -280,7 +280,10 @@ def figure9_table(panel: dict) -> Table:
 
 def figure9_findings(panel: dict) -> list[str]:
     """Which K is best: fewest episodes to threshold, or (no threshold) the highest final
-    moving return; with Mann-Whitney tests of the best against the others."""
+    moving return; with Mann-Whitney tests of the best against the others. The verdict says
+    its power, as Table 5's does: REPRODUCED only where K = 1 is best and significantly so
+    against each other K (p < 0.05); NOT reproduced where another K is significantly better
+    than K = 1; otherwise inconclusive, with the budget where it is below the paper's."""
     rows = {r["k"]: r for r in panel["rows"]}
     if panel["threshold"] is not None:
         key, better, what = "episodes_to_threshold", min, "mean episodes to threshold"
@@ -292,23 +295,32 @@ def figure9_findings(panel: dict) -> list[str]:
     if not means:
         return []
     best = better(means, key=means.get)
-    steps = panel.get("steps")
-    if "steps" not in panel and panel.get("budget", "").endswith(" steps"):  # older files
-        steps = float(panel["budget"].split()[0].replace(",", ""))
-    short = inconclusive(panel["env"], None if steps else panel.get("episodes"), steps)
-    verdict = (
-        "REPRODUCED (K = 1 best, as in the paper)"
-        if best == 1.0
-        else f"{short or 'NOT reproduced'} (the paper: K = 1 slightly best)"
-    )
+    trained = [r["episodes_per_seed"] for r in panel["rows"] if "episodes_per_seed" in r]
+    if trained:  # the episodes the runs took; the least-trained K sets the budget's power
+        short = inconclusive(panel["env"], min(trained))
+    else:  # older files: the budget
+        steps = panel.get("steps")
+        if "steps" not in panel and panel.get("budget", "").endswith(" steps"):
+            steps = float(panel["budget"].split()[0].replace(",", ""))
+        short = inconclusive(panel["env"], None if steps else panel.get("episodes"), steps)
     text = ", ".join(f"K={k:g}: {m:.0f}" for k, m in means.items())
-    tests, significant = [], False
+    tests, p = [], {}
     for k in means:
-        p = None if k == best else mann_whitney_p(rows[best][key], rows[k][key])
-        if p is not None:
-            significant |= p < 0.05
-            tests.append(f"K={best:g} vs K={k:g}: p = {p:.2g}")
+        p[k] = None if k == best else mann_whitney_p(rows[best][key], rows[k][key])
+        if p[k] is not None:
+            tests.append(f"K={best:g} vs K={k:g}: p = {p[k]:.2g}")
     noise = f" (Mann-Whitney {'; '.join(tests)})" if tests else ""
-    if tests and not significant:
-        verdict += "; the differences are within seed-to-seed noise"
+    others = [k for k in means if k != best]
+    if best == 1.0 and others and all(p[k] is not None and p[k] < 0.05 for k in others):
+        verdict = "REPRODUCED (K = 1 best, as in the paper)"
+    elif best != 1.0 and 1.0 in means and p[1.0] is not None and p[1.0] < 0.05 and not short:
+        verdict = f"NOT reproduced (K={best:g} significantly better; the paper: K = 1 best)"
+    else:
+        seeds = rows[best]["runs"]
+        undecided = short or f"inconclusive at {seeds} seeds (no difference significant)"
+        verdict = (
+            f"K = 1 best, as in the paper, but not significantly: {undecided}"
+            if best == 1.0
+            else f"{undecided} (the paper: K = 1 slightly best)"
+        )
     return [f"Figure 9, {panel['env']}: {what} {text}; best K={best:g}{noise}: {verdict}."]
