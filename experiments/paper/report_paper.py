@@ -283,7 +283,8 @@ def figure9_findings(panel: dict) -> list[str]:
     moving return; with Mann-Whitney tests of the best against the others. The verdict says
     its power, as Table 5's does: REPRODUCED only where K = 1 is best and significantly so
     against each other K (p < 0.05); NOT reproduced where another K is significantly better
-    than K = 1; otherwise inconclusive, with the budget where it is below the paper's."""
+    than K = 1 at the paper's budget; otherwise inconclusive, with the budget where it is
+    below the paper's."""
     rows = {r["k"]: r for r in panel["rows"]}
     if panel["threshold"] is not None:
         key, better, what = "episodes_to_threshold", min, "mean episodes to threshold"

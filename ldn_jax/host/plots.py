@@ -70,9 +70,8 @@ def learning_curves(
 
 
 def run_curves(run_dir: Path, name: str) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], Config]:
-    """Moving return vs episodes of one run directory: `{label: (episodes [S, T], returns [S,
-    T])}`
-    with a label `name: algo K=k` per K (K left out where it does not matter; a sweep's
+    """Moving return vs episodes of one run directory: `{label: (episodes [S, T], returns
+    [S, T])}` with a label `name: algo K=k` per K (K left out where it does not matter; a sweep's
     values added), and its config.
 
     Raises ValueError with a one-line message for a missing or unreadable run.
