@@ -129,17 +129,22 @@ def smoke(tmp_path_factory):
     """
     results = tmp_path_factory.mktemp("results")
     env = {**os.environ, "JAX_DISABLE_MOST_OPTIMIZATIONS": "1"}
-    command = [sys.executable, "-m", "experiments.paper.all", "--smoke"]
-    done = subprocess.run(
+    done = _smoke_script("all", results, timeout=600, env=env)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return results, done.stdout
+
+
+def _smoke_script(name: str, results: Path, timeout: int, env: dict | None = None):
+    """`python -m experiments.paper.NAME --smoke --results RESULTS`, run to its end."""
+    command = [sys.executable, "-m", f"experiments.paper.{name}", "--smoke"]
+    return subprocess.run(
         [*command, "--results", str(results)],
         capture_output=True,
         text=True,
-        timeout=600,
+        timeout=timeout,
         env=env,
         cwd=ROOT,
     )
-    assert done.returncode == 0, done.stderr[-3000:]
-    return results, done.stdout
 
 
 def test_make_paper_answers_help_and_bad_flags_before_any_script_runs(capsys):
@@ -165,14 +170,7 @@ def test_make_paper_and_each_script_stop_with_one_line_at_a_run_another_process_
     out = tmp_path / "runs" / "smoke" / "cartpole-v0-a2c"  # table2's first run at the smoke scale
     out.mkdir(parents=True)
     with RunDir(out).hold():
-        script = [sys.executable, "-m", "experiments.paper.table2", "--smoke"]
-        alone = subprocess.run(
-            [*script, "--results", str(tmp_path)],
-            capture_output=True,
-            text=True,
-            timeout=300,
-            cwd=ROOT,
-        )
+        alone = _smoke_script("table2", tmp_path, timeout=300)
         monkeypatch.setattr(cache, "train", lambda *a, **k: pytest.fail("trained"))
         monkeypatch.setattr(table2, "main", lambda argv: cache.ensure_run(config, out))
         paper = ["--smoke", "--results", str(tmp_path)]

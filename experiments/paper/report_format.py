@@ -141,6 +141,30 @@ def too_wide(x: list, y: list, lower_is_better: bool = False) -> str | None:
     return f"inconclusive at {seeds} (P(better) {iqm_stats.improvement_text(value)} includes 0.5)"
 
 
+def powered_verdict(
+    claim: str,
+    paper: str,
+    as_claimed: bool,
+    shown: bool,
+    reversal: str | None,
+    short: str | None,
+    seeds: int,
+) -> str:
+    """A verdict that says its power: REPRODUCED where ours ranks as the paper's `claim` says
+    (`as_claimed`) and Mann-Whitney shows it against each alternative (`shown`); NOT
+    reproduced where `reversal` says which alternative is significantly better, at the
+    paper's budget; otherwise inconclusive: `short` (the budget below the paper's) or at
+    `seeds` seeds."""
+    if as_claimed and shown:
+        return f"REPRODUCED ({claim}, as in the paper)"
+    if reversal and not short:
+        return f"NOT reproduced ({reversal})"
+    undecided = short or f"inconclusive at {seeds} seeds (no difference significant)"
+    if as_claimed:
+        return f"{claim}, as in the paper, but not significantly: {undecided}"
+    return f"{undecided} (the paper: {paper})"
+
+
 def budget(record: dict) -> str:
     """A run's budget per seed as its result file states it (files from before step
     budgets give episodes only)."""

@@ -17,6 +17,7 @@ from experiments.paper.report_format import (
     mann_whitney,
     mann_whitney_p,
     pm,
+    powered_verdict,
     too_wide,
 )
 
@@ -125,21 +126,18 @@ def table5_verdict(algos: dict[str, dict], ldn_fewest: bool, short: str | None) 
     ldn = algos.get("ppo-ldn", {}).get("episodes_to_top", [])
     others = {a: r["episodes_to_top"] for a, r in algos.items() if a != "ppo-ldn"}
     p = {a: mann_whitney_p(ldn, top) for a, top in others.items()}
-    if ldn_fewest and others and all(v is not None and v < 0.05 for v in p.values()):
-        return "REPRODUCED (PPO2-LDN fewest, as in the paper)"
+    shown = bool(others) and all(v is not None and v < 0.05 for v in p.values())
     fewer = [
         a
         for a in others
         if p[a] is not None and p[a] < 0.05 and algos[a]["mean"] < algos["ppo-ldn"]["mean"]
     ]
-    if fewer and not short:
-        first = algo_name(fewer[0])
-        return f"NOT reproduced ({first} significantly fewer; the paper: PPO2-LDN fewest)"
+    reversal = (
+        f"{algo_name(fewer[0])} significantly fewer; the paper: PPO2-LDN fewest" if fewer else None
+    )
     runs = next(iter(algos.values()))["runs"]
-    undecided = short or f"inconclusive at {runs} seeds (no difference significant)"
-    if ldn_fewest:
-        return f"PPO2-LDN fewest, as in the paper, but not significantly: {undecided}"
-    return f"{undecided} (the paper: PPO2-LDN fewest)"
+    fewest = "PPO2-LDN fewest"
+    return powered_verdict(fewest, fewest, ldn_fewest, shown, reversal, short, runs)
 
 
 def table5_finding(env: str, algos: dict[str, dict]) -> str:

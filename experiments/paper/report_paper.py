@@ -20,6 +20,7 @@ from experiments.paper.report_format import (
     iqm,
     mann_whitney_p,
     pm,
+    powered_verdict,
 )
 
 
@@ -312,16 +313,11 @@ def figure9_findings(panel: dict) -> list[str]:
             tests.append(f"K={best:g} vs K={k:g}: p = {p[k]:.2g}")
     noise = f" (Mann-Whitney {'; '.join(tests)})" if tests else ""
     others = [k for k in means if k != best]
-    if best == 1.0 and others and all(p[k] is not None and p[k] < 0.05 for k in others):
-        verdict = "REPRODUCED (K = 1 best, as in the paper)"
-    elif best != 1.0 and 1.0 in means and p[1.0] is not None and p[1.0] < 0.05 and not short:
-        verdict = f"NOT reproduced (K={best:g} significantly better; the paper: K = 1 best)"
-    else:
-        seeds = rows[best]["runs"]
-        undecided = short or f"inconclusive at {seeds} seeds (no difference significant)"
-        verdict = (
-            f"K = 1 best, as in the paper, but not significantly: {undecided}"
-            if best == 1.0
-            else f"{undecided} (the paper: K = 1 slightly best)"
-        )
+    shown = bool(others) and all(p[k] is not None and p[k] < 0.05 for k in others)
+    worse = best != 1.0 and 1.0 in means and p[1.0] is not None and p[1.0] < 0.05
+    reversal = f"K={best:g} significantly better; the paper: K = 1 best" if worse else None
+    seeds = rows[best]["runs"]
+    verdict = powered_verdict(
+        "K = 1 best", "K = 1 slightly best", best == 1.0, shown, reversal, short, seeds
+    )
     return [f"Figure 9, {panel['env']}: {what} {text}; best K={best:g}{noise}: {verdict}."]
