@@ -193,7 +193,9 @@ class ModelConfig:
     """The dynamics model M1, its frozen twin M0, and how M1 is fitted."""
 
     ld: str = "m0"
-    """Learning-degree estimator, one of `LD_ESTIMATORS`: "m0" compares M1 with M0 (eq. 3-6);
+    """Learning-degree estimator, one of `LD_ESTIMATORS`: "m0" compares M1 with M0 (eq. 3-6;
+    with `probabilistic`, the drawn elite's mean prediction with that member's own frozen
+    initial copy);
     "ensemble" fits `ensemble` independently initialised models instead of one, imagines with
     their mean prediction, and takes LD = 2 sigmoid(-K d_rel) from their disagreement relative
     to their fit error."""
@@ -981,11 +983,6 @@ def validate(config: Config) -> Config:
             model.elites is None or 1 <= model.elites <= model.ensemble,
             f"elites must be in [1, ensemble size {model.ensemble}] (or none: all), got "
             f"{model.elites}",
-        ),
-        (
-            not model.probabilistic or model.ld in ("ensemble", "variance"),
-            "probabilistic models are an ensemble: set ld 'ensemble' or 'variance' (M0 is the "
-            "paper's single linear net's twin)",
         ),
         (
             model.ld != "variance" or model.probabilistic,

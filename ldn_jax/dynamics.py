@@ -116,8 +116,9 @@ class Dynamics:
 
     @property
     def ensemble(self) -> bool:
-        """M1 is `config.ensemble` stacked members (`ld` "ensemble" or "variance")."""
-        return self.config.ld in ("ensemble", "variance")
+        """M1 is `config.ensemble` stacked members (`ld` "ensemble" or "variance", or any
+        probabilistic model)."""
+        return self.config.ld in ("ensemble", "variance") or self.config.probabilistic
 
     @property
     def probabilistic(self) -> bool:

@@ -235,7 +235,10 @@ def ld_history(dynamics: Dynamics, workers: int) -> Array | None:
 
 
 def _m0_estimate(dynamics: Dynamics, model: ModelState, obs: Array, action: Array, key: Array):
-    """M1's normalised prediction, and eq. 3's sigma2 of M1 vs M0."""
+    """M1's normalised prediction, and eq. 3's sigma2 of M1 vs M0 (a probabilistic
+    ensemble: `_gaussian_estimate`, of the drawn member against its own M0)."""
+    if dynamics.probabilistic:
+        return _gaussian_estimate(dynamics, model, obs, action, key, "m0")
     del key  # deterministic
     m1 = dynamics.predict_normalized(model.params, model.stats, obs, action)
     m0 = dynamics.predict_normalized(model.frozen, model.stats, obs, action)
@@ -271,7 +274,9 @@ def _gaussian_estimate(
     """A probabilistic ensemble's step: a sample of one elite drawn per row (or, under
     `imagined_step` "mean", the elites' mean prediction), and either the
     elites' disagreement on their means ("ensemble") or the drawn member's mean predicted
-    variance, halved as eq. 3 halves ("variance"), relative to the held-out error."""
+    variance, halved as eq. 3 halves ("variance"), relative to the held-out error; or
+    ("m0") eq. 3's sigma2 of the drawn member's mean against its frozen initial copy's, as
+    the paper reads M1 against M0 (not relative: eq. 4-6 take it as it is)."""
     mean, log_var = jax.vmap(dynamics.predict_gaussian, (0, None, None, None))(
         model.params, model.stats, obs, action
     )  # [E, N, D + 1]
@@ -286,6 +291,11 @@ def _gaussian_estimate(
         noise = jax.random.normal(k_noise, centre.shape)
         sample = centre + jnp.exp(0.5 * chosen_log_var) * noise
     reduce = dynamics.config.ld_reduce
+    if reading == "m0":
+        initial, _ = jax.vmap(dynamics.predict_gaussian, (0, None, None, None))(
+            model.frozen, model.stats, obs, action
+        )
+        return (sample[..., :-1], sample[..., -1]), deviation(centre, chosen(initial), reduce)
     if reading == "variance":
         d = 0.5 * REDUCE[reduce](jnp.exp(chosen_log_var), axis=-1)
     else:

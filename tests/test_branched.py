@@ -363,7 +363,6 @@ def _build(*argv):
         (["--algo", "ldn", "--stop", "macura", "--ld", "m0"], "stop 'macura' reads the"),
         (["--algo", "ldn", "--stop", "m2ac", "--ld", "m0"], "stop 'm2ac' reads the disagreement"),
         (["--algo", "ldn", "--set", "model.ld=variance"], "it needs model.probabilistic"),
-        (["--algo", "ldn", "--set", "model.probabilistic=true"], "set ld 'ensemble' or 'variance'"),
         (["--algo", "ldn", "--ld", "ensemble", "--set", "model.elites=9"], "elites must be in [1,"),
         (["--algo", "ldn", "--set", "model.branches=0"], "branches must be >= 1"),
         (["--algo", "ldn", "--set", "model.imagined_std=fixed"], "unknown imagined_std 'fixed'"),
@@ -495,3 +494,32 @@ def test_the_branched_preset_solves_inverted_pendulum_sooner_than_ppo(tmp_path):
         steps[algo] = solved[0] if solved else math.inf
     assert steps["ppo-ldn"] <= 25_000, steps
     assert steps["ppo-ldn"] < steps["ppo"], steps
+
+
+def test_the_m0_reading_of_a_probabilistic_ensemble_is_eq3_on_the_drawn_member():
+    """`ld` "m0" with `probabilistic`: sigma2 = 1/2 mean((mu_M1 - mu_M0)^2) of the drawn elite's
+    mean against its own initial copy; 0 (so P(stop) 1) while M1 is M0."""
+    from ldn_jax.imagination import LD_ESTIMATES
+
+    dynamics = Dynamics(ModelConfig(**{**BRANCHED, "ld": "m0"}), 4, 2)
+    assert dynamics.ensemble  # a probabilistic model is always an ensemble
+    model = dynamics.init(jax.random.key(0))
+    obs, action = jax.random.normal(jax.random.key(1), (8, 4)), jnp.ones((8, 2))
+    estimate, degree = LD_ESTIMATES["m0"]
+    _, sigma2 = estimate(dynamics, model, obs, action, jax.random.key(2))
+    assert np.asarray(sigma2).tolist() == [0.0] * 8
+    assert np.asarray(degree(sigma2, 1.0)[1]).tolist() == [1.0] * 8
+    moved = model.replace(params=jax.tree.map(lambda x: x * 1.5, model.params))
+    key = jax.random.key(2)
+    _, sigma2 = estimate(dynamics, moved, obs, action, key)
+    # The member each row drew, as the estimator draws it (the same key).
+    pick = jax.random.randint(jax.random.split(key)[0], (8,), 0, 2)
+    member = np.asarray(moved.elites)[np.asarray(pick)]
+    stats = dynamics.init_stats()
+    for row in range(8):
+        params = lambda tree, i=member[row]: jax.tree.map(lambda x: x[i], tree)
+        m1, _ = dynamics.predict_gaussian(params(moved.params), stats, obs[row], action[row])
+        m0, _ = dynamics.predict_gaussian(params(model.params), stats, obs[row], action[row])
+        expected = 0.5 * float(jnp.mean(jnp.square(m1 - m0)))
+        assert expected > 1e-4
+        assert float(sigma2[row]) == pytest.approx(expected, rel=1e-5)

@@ -466,7 +466,7 @@ def test_default_budget_targets_are_the_users_commands():
 def test_targets_runs_one_row_and_keeps_the_others_with_their_dates(tmp_path, capsys, monkeypatch):
     from experiments.paper import targets
 
-    monkeypatch.setattr(targets.common, "_compile_cache", lambda results: None)
+    monkeypatch.setattr(targets.common, "compile_cache", lambda results: None)
     earlier = json.loads((ROOT / "experiments/results/targets/targets.json").read_text())
     earlier = {**earlier, "scale": "smoke", "machine": {**earlier["machine"], "date": "2026-11-30"}}
     earlier.pop("curves_date", None)  # written before rows were dated

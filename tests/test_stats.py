@@ -66,3 +66,12 @@ def test_cells():
     assert stats.improvement_text({"probability": 0.8, "ci95": [0.61, 0.97]}) == (
         "0.80 [0.61, 0.97]"
     )
+
+
+def test_holm_adjusts_step_down_in_the_given_order():
+    # sorted: 0.01 x 4 = 0.04, 0.02 x 3 = 0.06, 0.03 x 2 = 0.06 (kept monotone), 0.5 x 1
+    assert stats.holm([0.03, 0.5, 0.01, 0.02]) == pytest.approx([0.06, 0.5, 0.04, 0.06])
+    # a later step never lowers an earlier one; adjusted p is capped at 1
+    assert stats.holm([0.04, 0.045]) == pytest.approx([0.08, 0.08])
+    assert stats.holm([0.6, 0.7]) == pytest.approx([1.0, 1.0])
+    assert stats.holm([0.014] + [0.5] * 11)[0] == pytest.approx(0.168)

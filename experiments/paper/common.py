@@ -166,7 +166,7 @@ def parse_args(argv: list[str] | None, description: str) -> tuple[Scale, Path]:
     p.add_argument("--smoke", action="store_true", help="tiny budget (tests); overrides --scale")
     p.add_argument("--results", type=Path, default=RESULTS, help=f"default: {RESULTS}")
     args = p.parse_args(argv)
-    _compile_cache(args.results)
+    compile_cache(args.results)
     return SCALES["smoke" if args.smoke else args.scale], args.results
 
 
@@ -180,7 +180,7 @@ def script(main: Callable[[list[str] | None], int]) -> int:
         return 2
 
 
-def _compile_cache(results: Path) -> None:
+def compile_cache(results: Path) -> None:
     """JAX's persistent compilation cache under the runs: the scripts compile the same
     training programs again (calibration.py retrains the cartpole-v2 ldn run in-process)."""
     import jax

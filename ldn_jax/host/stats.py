@@ -137,6 +137,19 @@ def improvement(x: Scores, y: Scores, lower_is_better: bool = False) -> dict:
     return {"probability": point, "ci95": low_high}
 
 
+def holm(pvalues: Sequence[float]) -> list[float]:
+    """Holm's step-down adjusted p values (Holm 1979), in the order given: the i-th smallest
+    p times (m - i + 1), made non-decreasing along that order and capped at 1. A comparison
+    is significant at family-wise level alpha where its adjusted p is below alpha."""
+    p = np.asarray(pvalues, float)
+    order = np.argsort(p, kind="stable")
+    scaled = p[order] * (len(p) - np.arange(len(p)))
+    adjusted = np.minimum(np.maximum.accumulate(scaled), 1.0)
+    out = np.empty_like(adjusted)
+    out[order] = adjusted
+    return out.tolist()
+
+
 def text(value: dict, digits: int = 0) -> str:
     """`estimate`'s result as a table cell: `512 [480, 540]` (IQM [95% interval])."""
     if value["iqm"] is None:
