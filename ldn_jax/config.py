@@ -1069,6 +1069,11 @@ def _stop_checks(config: Config) -> list[tuple[bool, str]]:
             "'ensemble' (its default)",
         ),
         (
+            stop != "macura" or model.imagine_start == "real",
+            "stop 'macura' sets its threshold from the branches' start states: it needs "
+            "imagine_start 'real' (the branched preset: --preset branched)",
+        ),
+        (
             stop != "oracle" or _observes_state(config.env),
             f"stop 'oracle' steps the real env from imagined observations, and {config.env}'s "
             f"observation is not its whole state{OBSERVES_STATE}",

@@ -200,20 +200,17 @@ PRESETS["branched"] = {
     "envs": {
         # A model fit and an imagined batch every 8 workers x 100 real steps (halfcheetah's
         # PPO: x 128, two of its 64-step rollouts).
-        # The pendulum's cut: 15 steps (docs/imagination.md: steps to a greedy 900 over 5
-        # seeds, IQM 13,067 at a cut of 15, 19,200 at 5, 20,000 for PPO).
+        # The pendulum's cut: 15 steps (docs/imagination.md).
         "inverted_pendulum": {"iteration_steps": 100, "model.horizon": 15},
-        # halfcheetah's cut (ppo-ldn's cap): 15, under which the LD draw beats PPO at 10 seeds
-        # (greedy IQM 4,350 against 3,761, P 0.81 [0.58, 0.97]); ppo-model's cut there
-        # measured 4,332 against 3,917 at 5 (10 seeds each): docs/defaults.md.
+        # halfcheetah's cut (ppo-ldn's cap): 15 (the measurements: docs/defaults.md, "The
+        # branched preset").
         "halfcheetah": {
             "iteration_steps": 100,
             "model.horizon": 15,
             "learners": {"ppo": {"iteration_steps": 128}},
         },
-        # hopper's imagined rows train the critic only: at 10 seeds (200k steps) greedy IQM
-        # 1,554 against 828 for rows that train the whole learner, P 0.82 [0.60, 1.00]
-        # (docs/defaults.md); PPO alone 1,410.
+        # hopper's imagined rows train the critic only (docs/defaults.md, "The branched
+        # preset").
         "hopper": {**_ONE_MUJOCO_ROLLOUT, "model.imagined_updates": "critic"},
         "walker2d": _ONE_MUJOCO_ROLLOUT,
         "ant": _ONE_MUJOCO_ROLLOUT,

@@ -413,7 +413,7 @@ def test_bad_branched_settings_are_one_line(argv, needle):
 
 
 def test_macura_defaults_its_estimator_to_the_ensemble():
-    config = _build("--algo", "ppo-model", "--stop", "macura")
+    config = _build("--algo", "ppo-model", "--stop", "macura", "--set", "model.imagine_start=real")
     assert config.model.ld == "ensemble" and config.stop_rule == "macura"
 
 

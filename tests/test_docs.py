@@ -60,3 +60,56 @@ def test_the_field_table_has_every_config_field(site):
 def test_no_page_points_outside_the_repository():
     for path in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]:
         assert "../shared" not in path.read_text(), path
+
+
+def _readme_results() -> list[list[str]]:
+    """The cells of each row of README.md's results table (header and rule left out)."""
+    text = (ROOT / "README.md").read_text()
+    section = text.split("## Results", 1)[1].split("\n## ", 1)[0]
+    rows = [line for line in section.splitlines() if line.startswith("| ")]
+    return [[cell.strip() for cell in row.strip("|").split(" | ")] for row in rows[1:]]
+
+
+def _is_commit(name: str) -> bool:
+    done = subprocess.run(
+        ["git", "cat-file", "-e", f"{name}^{{commit}}"], cwd=ROOT, capture_output=True, check=False
+    )
+    return done.returncode == 0
+
+
+def test_every_readme_result_names_its_record_and_commit():
+    """Each results row names committed files that exist and the commit(s) that wrote them; a
+    range of commits (runs trained across code versions) or no record says "exploratory"."""
+    rows = _readme_results()
+    assert len(rows) >= 5
+    in_git = (ROOT / ".git").exists() and shutil.which("git")
+    for cells in rows:
+        assert len(cells) == 4, cells
+        record = cells[-1]
+        if record == "exploratory, no record":
+            continue
+        paths = re.findall(r"`([^`]+)`", record)
+        assert paths, cells
+        for path in paths:
+            assert (ROOT / path).exists(), path
+        commits = re.search(r"\(([0-9a-f]{7,40})(?:\.\.([0-9a-f]{7,40}))?[;)]", record)
+        assert commits, cells
+        if commits.group(2):
+            assert "exploratory" in record, cells
+        if in_git:
+            assert all(_is_commit(c) for c in commits.groups() if c), record
+
+
+def test_the_readme_headline_rows_have_a_record_per_arm():
+    """A README row that quotes the headline study names its records folder, and every arm the
+    study has scored there has its committed record."""
+    from experiments.paper import headline
+
+    rows = [cells for cells in _readme_results() if "records/headline" in cells[-1]]
+    assert rows
+    scored = sorted((ROOT / "experiments/results/headline/runs").glob("*.json"))
+    for file in scored:
+        if "gymnasium" in file.read_text():
+            record = ROOT / "experiments/results/records/headline" / file.stem
+            assert (record / "summary.json").is_file(), file.name
+    assert set(headline.ARMS) >= {p.stem.split("-s10")[0].split("-", 1)[1] for p in scored}

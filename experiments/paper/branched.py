@@ -137,6 +137,13 @@ def late_returns(history: dict, steps: int) -> list[float | None]:
     return [float(r[m].mean()) if m.any() else None for r, m in zip(returns, late, strict=True)]
 
 
+def recorded(runs: Path, row: dict) -> bool:
+    """Whether every run a row is made of has a committed record (`cache.record_of`)."""
+    dirs = run_dirs(runs, row["env"], row["rule"], len(row["eval_return"]), row["steps"])
+    records = [cache.record_of(run) for _, _, run in dirs]
+    return all(r is not None and (r / "summary.json").is_file() for r in records)
+
+
 def _earlier(path: Path) -> list[dict]:
     """The rows an earlier call wrote (rows of rules or envs no longer studied dropped)."""
     if not path.exists():
@@ -213,6 +220,8 @@ def main(argv: list[str] | None = None) -> int:
     ordered = [
         rows[key] for key in sorted(rows, key=lambda k: (envs.index(k[0]), rules.index(k[1])))
     ]
+    for row in ordered:
+        row["recorded"] = recorded(runs, row)
     common.write_json(out / "branched.json", {"rows": ordered})
     (out / "branched.md").write_text(section(ordered))
     figure(ordered, out / "branched.png")
