@@ -51,7 +51,10 @@ def fields_table() -> str:
     rows = ["| field | type | default | what it is |", "|---|---|---|---|"]
     for name, kind in config.fields().items():
         value = settings.as_text(config.get_field(defaults, name))
-        rows.append(f"| `{name}` | {kind.describe()} | `{value}` | {_cell(docs.get(name, ''))} |")
+        what = docs.get(name, "")
+        if name in config.CHOICES:
+            what += " One of: " + ", ".join(f"`{c}`" for c in config.CHOICES[name]) + "."
+        rows.append(f"| `{name}` | {kind.describe()} | `{value}` | {_cell(what)} |")
     return "\n".join(rows)
 
 

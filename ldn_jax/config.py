@@ -327,7 +327,7 @@ class ModelConfig:
     the learner's own (`AgentConfig.epochs`). Imagined rows are fresh every iteration, so
     fewer passes over more of them is a trade the learner's epochs, chosen for scarce real
     rows, do not make: at halfcheetah's 20 epochs, imagination and its updates are the
-    largest share of a branched run's time (41-48%, docs/imagination.md)."""
+    largest share of a branched run's time (docs/imagination.md)."""
     probabilistic: bool = False
     """Each member of the ensemble (`ld` "ensemble" or "variance") outputs a Gaussian over
     the standardised next observation and reward, fitted by negative log-likelihood with
@@ -397,9 +397,8 @@ class ModelConfig:
     """An imagined episode stops (a truncation: the critic bootstraps) at a predicted
     observation outside the box of real observations in the buffer, widened on each side
     by this fraction of the box's width; None: never. M1 is fitted on real transitions
-    only, so outside that box its prediction is extrapolation (the paper's linear nets
-    drive inverted_pendulum's cart through its rails: 13-57% of imagined steps had
-    |x| > 1, the rail, up to x = 9)."""
+    only, so outside that box its prediction is extrapolation (the paper's linear nets drive
+    inverted_pendulum's cart through its rails: docs/defaults.md)."""
 
 
 @dataclass(frozen=True)
@@ -676,6 +675,28 @@ class FieldType:
     def describe(self) -> str:
         text = f"{self.base.__name__}s, comma-separated" if self.sequence else self.base.__name__
         return text + (" or none" if self.optional else "")
+
+
+CHOICES: dict[str, tuple[str, ...]] = {
+    "algo": tuple(ALGORITHMS),
+    "schedule": SCHEDULES,
+    "backend": tuple(BACKEND_CHOICES),
+    "agent.activation": ACTIVATIONS,
+    "agent.init": INITS,
+    "model.ld": LD_ESTIMATORS,
+    "model.ld_reduce": LD_REDUCTIONS,
+    "model.stop": STOP_RULES,
+    "model.action_encoding": ACTION_ENCODINGS,
+    "model.imagine": IMAGINE_MODES,
+    "model.imagine_start": IMAGINE_STARTS,
+    "model.imagined_std": IMAGINED_STD,
+    "model.imagined_updates": IMAGINED_UPDATES,
+    "model.imagined_step": IMAGINED_STEPS,
+    "model.world": WORLDS,
+    "model.activation": ACTIVATIONS,
+}
+"""The fields that take one of a list of names, and the names (what `validate` accepts; the
+docs' field table lists them, and a test checks each flag's help names them all)."""
 
 
 def fields() -> dict[str, FieldType]:

@@ -101,7 +101,7 @@ _ZOO_HALFCHEETAH_PPO = {
 # PPO's MuJoCo constants of OpenAI Baselines and CleanRL in our options: rollouts of 8 workers
 # x 256 steps (2,048 rows) in 32 minibatches, 64 x 64 tanh layers, a state-independent log
 # std from 0, an unbounded mean, rewards over the running return's std, a clipped value loss
-# (docs/defaults.md: on hopper at 300k steps, greedy IQM 2,446 against 1,034).
+# (docs/defaults.md, "Locomotion tasks").
 _MUJOCO_PPO = {
     "schedule": "steps",
     "iteration_steps": 256,

@@ -113,3 +113,41 @@ def test_the_readme_headline_rows_have_a_record_per_arm():
             record = ROOT / "experiments/results/records/headline" / file.stem
             assert (record / "summary.json").is_file(), file.name
     assert set(headline.ARMS) >= {p.stem.split("-s10")[0].split("-", 1)[1] for p in scored}
+
+
+def _words(text: str) -> set[str]:
+    return set(re.findall(r"[\w-]+", text))
+
+
+def test_every_choice_is_named_in_its_flags_help_and_the_field_table(site):
+    """A value added to a choice field (a stop rule, an estimator, a world, ...) must be
+    described where users look: its flag's help and the docs' field table."""
+    from ldn_jax.config import CHOICES
+    from ldn_jax.host import flags
+
+    parser = flags.parser()
+    by_dest = {action.dest: action for action in parser._actions}
+    for flag, field in flags.CONFIG_FLAGS.items():
+        if field in CHOICES:
+            help_text = by_dest[flag].help
+            missing = [c for c in CHOICES[field] if c not in _words(help_text)]
+            assert not missing, (flag, missing)
+            if by_dest[flag].choices is not None:
+                assert tuple(by_dest[flag].choices) == CHOICES[field], flag
+    html = (site / "configuration" / "index.html").read_text()
+    for field, values in CHOICES.items():
+        row = html.split(f"<td><code>{field}</code></td>", 1)[1].split("</tr>", 1)[0]
+        missing = [v for v in values if f"<code>{v}</code>" not in row]
+        assert not missing, (field, missing)
+
+
+def test_the_choice_table_is_what_validate_accepts():
+    from ldn_jax.config import CHOICES, Config, from_preset, validate
+
+    for field in CHOICES:
+        section, _, name = field.rpartition(".")
+        bad = {name: "no-such-value"}
+        overrides = {section: bad} if section else bad
+        with pytest.raises(ValueError):
+            validate(from_preset("paper", **{"env": "cartpole-v1", **overrides}))
+    assert Config().model.stop is None  # the algorithm's own rule: not one of the names

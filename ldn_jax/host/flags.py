@@ -170,8 +170,9 @@ def parser() -> Parser:
     p.add_argument(
         "--ld",
         choices=LD_ESTIMATORS,
-        help="learning-degree estimator: m0 (M1 vs its initial copy M0, the paper) or ensemble "
-        "(disagreement of --ensemble-size models relative to their fit error) (default m0)",
+        help="learning-degree estimator: m0 (M1 vs its initial copy M0, the paper), ensemble "
+        "(disagreement of --ensemble-size models relative to their fit error) or variance (a "
+        "probabilistic ensemble's own predicted variance) (default m0)",
     )
     p.add_argument(
         "--ensemble-size",
@@ -200,9 +201,11 @@ def parser() -> Parser:
         choices=STOP_RULES,
         help="what ends an imagined episode early: ld (the learning-degree draw, MBRL-LDN; "
         "--ld picks its estimator), m2ac (keep the --m2ac-keep share of running rollouts the "
-        "ensemble is surest of, each step), horizon (cut after --horizon steps, MBPO), oracle "
-        "(stop where the true one-step error exceeds --oracle-error; envs whose observation "
-        "is their state) or none "
+        "ensemble is surest of, each step), macura (stop where the ensemble's disagreement "
+        "passes a threshold set each iteration from the branches' starts; needs branches), "
+        "horizon (cut after --horizon steps), mbpo (MBPO's horizon schedule, growing with "
+        "the real steps), oracle (stop where the true one-step error exceeds --oracle-error; "
+        "envs whose observation is their state) or none "
         "(A3C-Model) (default: ld for ldn and ppo-ldn, none for a2c-model and ppo-model)",
     )
     p.add_argument(
