@@ -691,6 +691,158 @@ def test_a_comparison_whose_interval_includes_even_odds_says_inconclusive_not_re
     )
 
 
+def _table4_row(env, algo, finals, episodes=2_000.0):
+    """A finished Table 4 row as table4.py writes it, around per-seed final returns."""
+    mean = sum(finals) / len(finals)
+    return {
+        "env": env, "algo": algo, "status": "done", "paper": 1.0, "budget": "1,000,000 steps",
+        "episodes": None,
+        "episodes_per_seed": episodes, "env_steps_per_seed": 1e6, "mean": mean, "sd": 1.0,
+        "iqm": mean, "ci95": None, "min": min(finals), "max": max(finals),
+        "eval_return": {"mean": mean, "sd": 1.0}, "final_moving_returns": finals,
+    }  # fmt: skip
+
+
+def test_table_4s_verdicts_read_the_p_holm_adjusted_over_the_six_tasks():
+    from experiments.paper import table4
+    from experiments.paper.report_mujoco import table4_section
+
+    ldn, model = [900, 910, 920, 930, 940], [100, 110, 120, 130, 905]  # p = 0.016
+    level = [500, 510, 520, 530, 540]
+    rows = []
+    for env in table4.ENVS:
+        rows += [_table4_row(env, "a2c-model", model if env == "ant" else level)]
+        rows += [_table4_row(env, "ldn", ldn if env == "ant" else level)]
+    table = {"seeds": 5, "rows": rows}
+    findings = table4_section(table).findings
+    assert len(findings) == 6
+    (ant,) = [f for f in findings if f.startswith("Table 4, ant ")]
+    # 0.016 alone would pass 0.05; among six tasks its adjusted p is 6 x 0.016 = 0.095
+    assert "Mann-Whitney p = 0.016, Holm-adjusted over 6 tasks 0.095" in ant
+    assert "REPRODUCED" not in ant
+    assert ant.endswith("no significant difference (the paper: MBRL-LDN higher): inconclusive "
+                        "at 5 seeds.")  # fmt: skip
+    # The same task on its own is a family of one: its p is its own.
+    alone = table4_section({"seeds": 5, "rows": rows[:2]}).findings[0]
+    assert "Holm-adjusted over 1 tasks 0.016" in alone
+    assert alone.endswith("REPRODUCED (MBRL-LDN higher, as in the paper).")
+
+
+def test_figure_9s_verdicts_read_the_p_holm_adjusted_over_the_figure():
+    from experiments.paper.report_paper import figure9_findings, figure9_section
+
+    high, low = [900, 910, 920, 930, 940], [100, 110, 120, 130, 140]
+
+    def panel(env):
+        rows = [
+            {"k": k, "runs": 5, "episodes_per_seed": 2_000.0, "mean": None, "sd": None,
+             "min": None, "max": None, "reached": 0, "imagined_steps_per_seed": 10.0,
+             "ld_mean_last_iterations": 0.5, "final_moving_returns": v,
+             "final_moving_return": {"mean": sum(v) / len(v), "sd": 1.0}}
+            for k, v in {0.5: low, 1.0: high, 2.0: low}.items()
+        ]  # fmt: skip
+        return {"env": env, "threshold": None, "seeds": 5, "budget": "1 steps", "rows": rows}
+
+    # On its own a panel is a family of two: 2 x 0.0079 < 0.05.
+    (alone,) = figure9_findings(panel("hopper"))
+    assert "Holm over 2 comparisons" in alone and alone.endswith("REPRODUCED (K = 1 best, as in "
+                                                                 "the paper).")  # fmt: skip
+    # Seven panels are 14 comparisons: 14 x 0.0079 > 0.05.
+    envs = ("cartpole-v2", "ant", "halfcheetah", "hopper", "reacher", "walker2d", "walker")
+    findings = figure9_section({"panels": [panel(env) for env in envs]}).findings
+    assert len(findings) == 7
+    for finding in findings:
+        assert (
+            "(Mann-Whitney, Holm over 14 comparisons: K=1 vs K=0.5: p = 0.0079, adjusted "
+            in finding
+        )
+        assert "REPRODUCED" not in finding
+        assert finding.endswith("K = 1 best, as in the paper, but not significantly: "
+                                "inconclusive at 5 seeds (no difference significant).")  # fmt: skip
+
+
+def _table5_row(tops, taken, imagined=None):
+    """A finished Table 5 row as table5.py writes it: per-seed episodes to the top (None: never
+    reached) and the episodes each seed took."""
+    reached = [t for t in tops if t is not None]
+    row = {
+        "episodes_to_top": tops, "episodes_per_run": taken, "reached": len(reached), "runs": 5,
+        "mean": sum(reached) / len(reached) if reached else None,
+        "episodes_per_seed": sum(taken) / len(taken), "env_steps_per_seed": 1e6,
+        "final_moving_return": {"mean": 1.0, "sd": 1.0}, "imagined_steps_per_seed": 0.0,
+        "ld_mean_last_iterations": None, "imagined_updates": None,
+    }  # fmt: skip
+    if imagined:
+        steps, updates = imagined
+        row |= {"imagined_steps": steps, "imagined_updates": updates,
+                "ld_mean_last_iterations": 0.4,
+                "imagined_steps_per_seed": sum(steps) / len(steps)}  # fmt: skip
+    return row
+
+
+def test_table_5_counts_a_seed_that_never_reached_the_top_at_the_episodes_it_took():
+    from experiments.paper.report_mujoco import table5_finding, table5_section
+
+    fast = [100, 110, 120, 130, 140]
+    never = _table5_row([None] * 5, [2_000] * 5)
+    algos = {"ppo": never, "ppo-model": never, "ppo-ldn": _table5_row(fast, [2_000] * 5)}
+    finding = table5_finding("hopper", algos)
+    # The unreached seeds are not dropped (on reached seeds only, there would be nothing to test):
+    # PPO2-LDN's five against PPO2's 2,000 x 5, p = 0.0075, Holm over the task's two 0.015.
+    assert "too few runs to test" not in finding
+    assert "PPO2-LDN vs PPO2: Mann-Whitney p = 0.0075, Holm-adjusted over 2 comparisons 0.015, " \
+           "P(better) = 1.00" in finding  # fmt: skip
+    assert "over every seed, one that never reached it counted at the episodes it took, " \
+           "PPO2-LDN (120) < PPO2 (2000) < PPO2-Model (2000)" in finding  # fmt: skip
+    assert ": REPRODUCED (PPO2-LDN fewest, as in the paper)." in finding
+    # One early seed of PPO2 and four at the budget: the mean of the reached seeds (50) would
+    # put PPO2 first; over every seed PPO2-LDN takes fewer.
+    algos["ppo"] = _table5_row([50, None, None, None, None], [2_000] * 5)
+    finding = table5_finding("hopper", algos)
+    assert "PPO2-LDN vs PPO2: Mann-Whitney p = 0.13, " in finding
+    assert "P(better) = 0.80" in finding and "PPO2-LDN (120) < PPO2 (1610)" in finding
+    # Table 5's family is every task's comparisons: three tasks, six tests.
+    table = {"top": "top", "seeds": 5, "rows": []}
+    for env in ("inverted_pendulum", "halfcheetah", "hopper"):
+        for algo, row in algos.items():
+            fields = {"top": 1.0, "min": 1, "max": 1, "sd": 1, "iqm": 1, "ci95": None,
+                      "eval_return": {"mean": 1.0, "sd": 1.0}, "paper": 1}  # fmt: skip
+            table["rows"].append({**row, **fields, "env": env, "algo": algo, "status": "done"})
+    findings = table5_section(table).findings
+    assert all("Holm-adjusted over 6 comparisons" in f for f in findings)
+    assert "PPO2-LDN vs PPO2-Model: Mann-Whitney p = 0.0075, Holm-adjusted over 6 comparisons " \
+           "0.045" in findings[0]  # fmt: skip
+    from experiments.paper.report_mujoco import to_top_or_budget
+
+    assert (
+        to_top_or_budget(_table5_row([50, None, None, None, None], [900] * 5)) == [50] + [900] * 4
+    )
+
+
+def test_table_5_always_prints_each_seeds_imagined_steps_and_updates():
+    from experiments.paper.report_mujoco import table5_finding
+
+    taken = [2_000] * 5
+    tops = [100, 110, 120, 130, 140]
+    model = ([9_000, 8_000, 7_000, 6_000, 5_000], [9, 8, 7, 6, 5])
+    ldn = ([3_558, 3_923, 3_182, 2_825, 3_628], [1, 2, 1, 1, 3])
+    algos = {
+        "ppo": _table5_row(tops, taken),
+        "ppo-model": _table5_row(tops, taken, model),
+        "ppo-ldn": _table5_row(tops, taken, ldn),
+    }
+    finding = table5_finding("hopper", algos)
+    # No run made zero updates, and still each seed's steps and updates are there.
+    assert " Imagined steps / updates on imagined rows, per seed: PPO2-Model 9,000/9, 8,000/8, " \
+           "7,000/7, 6,000/6, 5,000/5 (mean 7,000 steps); PPO2-LDN 3,558/1, 3,923/2, 3,182/1, " \
+           "2,825/1, 3,628/3 (mean 3,423 steps, mean LD 0.40)." in finding  # fmt: skip
+    assert "made no update" not in finding
+    algos["ppo-ldn"]["imagined_updates"] = [0, 2, 1, 1, 3]
+    assert "PPO2-LDN made no update on imagined rows in 1 of 5 runs" in table5_finding(
+        "hopper", algos
+    )
+
+
 def test_the_cpu_full_scale_runs_every_mujoco_table_at_1m_steps_with_5_seeds():
     from experiments.paper import common
 
@@ -872,7 +1024,13 @@ def test_the_branched_study_keeps_earlier_rows_and_names_each_envs_seeds(tmp_pat
     assert "| training return, last 10% of steps |" in text and "| 3 | 10 [10, 10] | – |" in text
     text = report_branched.section([*earlier, row("hopper", "mbpo", 5, 40.0)])
     assert "### hopper, 100 steps, 3-5 seeds" in text
-    assert "no rule, cut at 5 steps: beats PPO (P 1.00)" in text
+    # Mann-Whitney on the greedy returns, Holm over the env's two rules (3 v 3 and 5 v 3)
+    assert "Verdicts on hopper (Holm over 2 rules)" in text
+    assert "no rule, cut at 5 steps: beats PPO (P 1.00, p 0.047, Holm 0.047)" in text
+    assert "1 to 15: beats PPO (P 1.00, p 0.014, Holm 0.027)" in text
+    close = [row("hopper", "ppo", 3, 10.0), row("hopper", "cap-5", 3, 20.0)]
+    close[1]["eval_return"] = [9.0, 10.0, 11.0]
+    assert "cut at 5 steps: no difference shown (P 0.50" in report_branched.section(close)
     assert "LD draw against" not in text  # no LD row, no question asked
     # The study's question: the LD draw against the field's rules and the best fixed cap.
     rows = [*earlier, row("hopper", "ld", 3, 30.0), row("hopper", "mbpo", 3, 40.0)]
@@ -956,7 +1114,9 @@ def test_the_cached_branched_study_rereads_finished_rows_and_trains_nothing(tmp_
     assert read == ["hopper-ld-s5-100", "hopper-ld-s5+5-100"]  # the 10-seed row's two parts
     ld, mbpo = (next(r for r in rows if r["rule"] == rule) for rule in ("ld", "mbpo"))
     assert ld["eval_return"] == [7.0] * 10 and ld["late_return"] == [7.0] * 10
-    assert mbpo == {**row("mbpo", 5), "train_seconds": 3.0}  # the other call's row stays
+    # the other call's row stays; it names no committed record (none in tmp_path)
+    assert mbpo == {**row("mbpo", 5), "train_seconds": 3.0, "recorded": False}
+    assert ld["recorded"] is False
 
 
 def test_the_family_study_says_which_model_runs_never_imagined(tmp_path):

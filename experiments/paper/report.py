@@ -62,7 +62,7 @@ def setup(data: dict, scale: common.Scale) -> Section:
     items = [
         f"Scale `{scale.name}`: {scale.seeds} seeds per run (vmapped: one compiled program per "
         f"run), a budget of {scale.episodes:,} real episodes per seed (summed over "
-        f"{scale.workers} synchronous workers), the `paper` preset (PAPER.md), K = 1 unless "
+        f"{scale.workers} synchronous workers), the `paper` preset (docs/paper.md), K = 1 unless "
         "stated. Episodes to threshold count real episodes in completion order; a run that never "
         "reaches the threshold within the budget is left out of mean and s.d. and counted in "
         "*reached*.",
@@ -181,8 +181,9 @@ def render(results: Path, scale: common.Scale) -> str:
     ]
     for section in (setup(data, scale), summary, *body):
         lines += render_section(section)
-    # The studies run on their own (experiments/paper/locomotion.py, family.py and branched.py).
-    for study in ("locomotion", "family", "branched"):
+    # The studies run on their own (experiments/paper/headline.py, locomotion.py, family.py and
+    # branched.py); the confirmatory one first.
+    for study in ("headline", "locomotion", "family", "branched"):
         text = results / study / f"{study}.md"
         if text.exists():
             lines += ["", text.read_text().strip(), ""]

@@ -105,6 +105,22 @@ def mann_whitney(x: list, y: list) -> str:
     return "too few runs to test" if p is None else f"Mann-Whitney p = {p:.2g}"
 
 
+def holm(pvalues: dict) -> dict:
+    """Holm-adjusted p per key over the keys that have a p (`iqm_stats.holm`: the family is
+    every comparison given that was tested); a key whose p is None stays None."""
+    tested = [key for key, p in pvalues.items() if p is not None]
+    adjusted = dict(zip(tested, iqm_stats.holm([pvalues[k] for k in tested]), strict=True))
+    return {key: adjusted.get(key) for key in pvalues}
+
+
+def adjusted_text(p: float | None, adjusted: float | None, family: str) -> str:
+    """ "Mann-Whitney p = 0.016, Holm-adjusted over 6 tasks 0.095": the raw two-sided p and
+    the adjusted one the verdict reads ("too few runs to test" without a p)."""
+    if p is None:
+        return "too few runs to test"
+    return f"Mann-Whitney p = {p:.2g}, Holm-adjusted over {family} {adjusted:.2g}"
+
+
 PAPER_MUJOCO_EPISODES = 1_734
 """The fewest episodes the paper trained a MuJoCo run for: Table 5's tops came after 1,734 to
 2,603 episodes (of up to 1,000 steps each); Table 4 and Figure 9 state no budget."""

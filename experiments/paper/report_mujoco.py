@@ -7,14 +7,15 @@ from experiments.paper.report_format import (
     TITLES,
     Section,
     Table,
+    adjusted_text,
     algo_name,
     better,
     budget,
     by_env,
     fmt,
+    holm,
     inconclusive,
     iqm,
-    mann_whitney,
     mann_whitney_p,
     pm,
     powered_verdict,
@@ -58,13 +59,32 @@ def table4_section(table: dict) -> Section:
         ]
         for r in done
     ]
+    findings = table4_findings(done)
+    title = TITLES["table4"]
+    return Section(title, [intro, Table(header, rows), *_pending_note(table)], findings)
+
+
+def table4_findings(rows: list[dict]) -> list[str]:
+    """Per task, MBRL-LDN vs A3C-Model on the final moving return: the six tasks are one
+    family, so each task's two-sided Mann-Whitney p is Holm-adjusted over the tasks that have
+    a test, and the verdict reads the adjusted p: REPRODUCED only where it is below 0.05 and
+    MBRL-LDN is higher; A3C-Model higher where it is below 0.05 the other way; otherwise no
+    significant difference (inconclusive: the budget below the paper's, or the seeds)."""
+    pairs = {
+        env: (algos["ldn"], algos["a2c-model"])
+        for env, algos in by_env(rows).items()
+        if set(algos) >= {"a2c-model", "ldn"}
+    }
+    raw = {
+        env: mann_whitney_p(ldn["final_moving_returns"], model["final_moving_returns"])
+        for env, (ldn, model) in pairs.items()
+    }
+    adjusted = holm(raw)
+    family = f"{sum(p is not None for p in raw.values())} tasks"
     findings = []
-    for env, algos in by_env(done).items():
-        if set(algos) != {"a2c-model", "ldn"}:
-            continue
-        model, ldn = algos["a2c-model"], algos["ldn"]
+    for env, (ldn, model) in pairs.items():
         x, y = ldn["final_moving_returns"], model["final_moving_returns"]
-        p, test = mann_whitney_p(x, y), mann_whitney(x, y)
+        p = adjusted[env]
         short = inconclusive(env, ldn.get("episodes_per_seed"), ldn.get("env_steps_per_seed"))
         if p is None or p >= 0.05:
             verdict = "no significant difference (the paper: MBRL-LDN higher): " + (
@@ -78,12 +98,11 @@ def table4_section(table: dict) -> Section:
             )
         findings.append(
             f"Table 4, {env} ({budget(ldn)}): MBRL-LDN {ldn['mean']:.1f} vs "
-            f"A3C-Model {model['mean']:.1f} final moving return ({test}, "
-            f"{better(x, y, False)}; paper "
+            f"A3C-Model {model['mean']:.1f} final moving return "
+            f"({adjusted_text(raw[env], p, family)}, {better(x, y, False)}; paper "
             f"{ldn['paper']} vs {model['paper']}): {verdict}."
         )
-    title = TITLES["table4"]
-    return Section(title, [intro, Table(header, rows), *_pending_note(table)], findings)
+    return findings
 
 
 def table5_section(table: dict) -> Section:
@@ -113,24 +132,67 @@ def table5_section(table: dict) -> Section:
         ]
         for r in done
     ]
-    findings = [table5_finding(env, algos) for env, algos in by_env(done).items()]
+    algos_by_env = by_env(done)
+    raw = {key: p for env, algos in algos_by_env.items() for key, p in table5_p(env, algos).items()}
+    adjusted = holm(raw)
+    family = f"{sum(p is not None for p in raw.values())} comparisons"
+    findings = [
+        table5_finding(env, algos, {a: adjusted[e, a] for e, a in adjusted if e == env}, family)
+        for env, algos in algos_by_env.items()
+    ]
     title = TITLES["table5"]
     return Section(title, [intro, Table(header, rows), *_pending_note(table)], findings)
 
 
-def table5_verdict(algos: dict[str, dict], ldn_fewest: bool, short: str | None) -> str:
+OTHERS = ("ppo", "ppo-model")
+"""What Table 5 tests PPO2-LDN against."""
+
+
+def to_top_or_budget(row: dict) -> list:
+    """Per seed the episodes to the top, every seed counted: a seed that never reached it
+    counts at the episodes it took (its budget; the run's mean episodes per seed in files
+    from before `episodes_per_run`), so that an unreached seed is never dropped."""
+    taken = row.get("episodes_per_run") or [row.get("episodes_per_seed")] * len(
+        row["episodes_to_top"]
+    )
+    return [b if t is None else t for t, b in zip(row["episodes_to_top"], taken, strict=True)]
+
+
+def _mean(values: list) -> float | None:
+    have = [v for v in values if v is not None]
+    return sum(have) / len(have) if have else None
+
+
+def table5_p(env: str, algos: dict[str, dict]) -> dict[tuple[str, str], float | None]:
+    """The raw two-sided Mann-Whitney p of PPO2-LDN against each other algorithm of the task
+    (`OTHERS`), over every seed (`to_top_or_budget`): `{(env, algo): p}`."""
+    if "ppo-ldn" not in algos:
+        return {}
+    ldn = to_top_or_budget(algos["ppo-ldn"])
+    return {(env, a): mann_whitney_p(ldn, to_top_or_budget(algos[a])) for a in OTHERS if a in algos}
+
+
+def table5_verdict(
+    algos: dict[str, dict],
+    ldn_fewest: bool,
+    short: str | None,
+    adjusted: dict[str, float | None] | None = None,
+) -> str:
     """REPRODUCED only where PPO2-LDN needs the fewest episodes and Mann-Whitney says so
-    against each other algorithm (p < 0.05); NOT reproduced where another needs significantly
-    fewer; otherwise the seeds cannot tell: inconclusive, with the budget where it is below the
-    paper's."""
-    ldn = algos.get("ppo-ldn", {}).get("episodes_to_top", [])
-    others = {a: r["episodes_to_top"] for a, r in algos.items() if a != "ppo-ldn"}
-    p = {a: mann_whitney_p(ldn, top) for a, top in others.items()}
+    against each other algorithm (Holm-adjusted p < 0.05: `adjusted`, per algorithm, over the
+    table's comparisons; without it, over this task's); NOT reproduced where another needs
+    significantly fewer; otherwise the seeds cannot tell: inconclusive, with the budget where
+    it is below the paper's. Every seed counts (`to_top_or_budget`)."""
+    ldn = to_top_or_budget(algos["ppo-ldn"]) if "ppo-ldn" in algos else []
+    others = {a: to_top_or_budget(r) for a, r in algos.items() if a != "ppo-ldn"}
+    if adjusted is None:
+        adjusted = holm({a: mann_whitney_p(ldn, top) for a, top in others.items()})
+    p = {a: adjusted.get(a) for a in others}
     shown = bool(others) and all(v is not None and v < 0.05 for v in p.values())
     fewer = [
         a
-        for a in others
-        if p[a] is not None and p[a] < 0.05 and algos[a]["mean"] < algos["ppo-ldn"]["mean"]
+        for a, top in others.items()
+        if p[a] is not None and p[a] < 0.05 and _mean(top) < _mean(ldn)
     ]
     reversal = (
         f"{algo_name(fewer[0])} significantly fewer; the paper: PPO2-LDN fewest" if fewer else None
@@ -140,7 +202,16 @@ def table5_verdict(algos: dict[str, dict], ldn_fewest: bool, short: str | None) 
     return powered_verdict(fewest, fewest, ldn_fewest, shown, reversal, short, runs)
 
 
-def table5_finding(env: str, algos: dict[str, dict]) -> str:
+def table5_finding(
+    env: str,
+    algos: dict[str, dict],
+    adjusted: dict[str, float | None] | None = None,
+    family: str | None = None,
+) -> str:
+    """The task's verdict: PPO2-LDN against each other algorithm on every seed (an unreached
+    seed at the episodes it took), Holm-adjusted over `family` (`adjusted`: per algorithm;
+    without it, over this task's comparisons); and per seed of each model-based run the
+    imagined steps and the learner updates made on imagined rows."""
     means = {a: r["mean"] for a, r in algos.items() if r["mean"] is not None}
     if not means:
         some = next(iter(algos.values()))
@@ -150,10 +221,19 @@ def table5_finding(env: str, algos: dict[str, dict]) -> str:
         )
     order = sorted(means, key=means.get)
     ours = " < ".join(f"{algo_name(a)} ({means[a]:.0f})" for a in order)
+    every = {a: to_top_or_budget(r) for a, r in algos.items()}
+    every_mean = {a: _mean(v) for a, v in every.items()}
+    every_order = sorted((a for a in every_mean if every_mean[a] is not None), key=every_mean.get)
+    counted = " < ".join(f"{algo_name(a)} ({every_mean[a]:.0f})" for a in every_order)
     reached = ", ".join(f"{algo_name(a)} {r['reached']}/{r['runs']}" for a, r in algos.items())
     some = next(iter(algos.values()))
     short = inconclusive(env, some.get("episodes_per_seed"), some.get("env_steps_per_seed"))
-    verdict = table5_verdict(algos, order[0] == "ppo-ldn" and len(means) == len(algos), short)
+    raw = {a: p for (_, a), p in table5_p(env, algos).items()}
+    if adjusted is None:
+        adjusted = holm(raw)
+        family = f"{sum(p is not None for p in raw.values())} comparisons"
+    ldn_fewest = len(every_order) == len(algos) and every_order[0] == "ppo-ldn"
+    verdict = table5_verdict(algos, ldn_fewest, short, adjusted)
     final = {a: r["final_moving_return"]["mean"] for a, r in algos.items()}
     unreached = [a for a, r in algos.items() if r["reached"] == 0]
     unreached = (
@@ -164,23 +244,39 @@ def table5_finding(env: str, algos: dict[str, dict]) -> str:
     )
     tests = "; ".join(
         f"PPO2-LDN vs {algo_name(a)}: "
-        + mann_whitney(algos["ppo-ldn"]["episodes_to_top"], algos[a]["episodes_to_top"])
+        + adjusted_text(raw[a], adjusted.get(a), family)
         + ", "
-        + better(algos["ppo-ldn"]["episodes_to_top"], algos[a]["episodes_to_top"], True)
-        for a in ("ppo", "ppo-model")
-        if a in algos and "ppo-ldn" in algos
+        + better(every["ppo-ldn"], every[a], True)
+        for a in OTHERS
+        if a in raw
     )
-    imagined = ", ".join(
-        f"{algo_name(a)} {r['imagined_steps_per_seed']:,.0f}"
-        + (
-            f" (mean LD {r['ld_mean_last_iterations']:.2f})"
-            if r.get("ld_mean_last_iterations") is not None and a.endswith("ldn")
-            else ""
-        )
-        for a, r in algos.items()
-        if r.get("imagined_steps_per_seed")
+    return (
+        f"Table 5, {env}: mean episodes to the top over the seeds that reached it {ours}; over "
+        f"every seed, one that never reached it counted at the episodes it took, {counted} "
+        f"({tests}). Reached: {reached}{unreached}: {verdict}.{imagined_text(algos)}"
     )
-    imagined = f" Imagined steps per seed: {imagined}." if imagined else ""
+
+
+def imagined_text(algos: dict[str, dict]) -> str:
+    """Per seed of each model-based run (model-free ones have no LD and no imagined rows):
+    the imagined steps and the learner updates made on imagined rows (history metric
+    `imagined_updates` summed over the run: PPO learns from its imaginary memory only once
+    the memory holds a full batch, so a run may imagine and never learn from it), always
+    printed; with a note where a run made none."""
+    parts = []
+    for a, r in algos.items():
+        if r.get("ld_mean_last_iterations") is None and r.get("imagined_updates") is None:
+            continue  # model-free
+        steps = r.get("imagined_steps") or [None] * len(r.get("imagined_updates") or [])
+        updates = r.get("imagined_updates") or [None] * len(steps)
+        seeds = ", ".join(f"{fmt(n, 0)}/{fmt(u, 0)}" for n, u in zip(steps, updates, strict=True))
+        ld = r.get("ld_mean_last_iterations")
+        ld = f", mean LD {ld:.2f}" if ld is not None and a.endswith("ldn") else ""
+        mean = f"mean {r.get('imagined_steps_per_seed') or 0:,.0f} steps{ld}"
+        parts.append(f"{algo_name(a)} {seeds} ({mean})" if seeds else f"{algo_name(a)} {mean}")
+    if not parts:
+        return ""
+    text = f" Imagined steps / updates on imagined rows, per seed: {'; '.join(parts)}."
     idle = [
         f"{algo_name(a)} made no update on imagined rows in {r['imagined_updates'].count(0)} "
         f"of {len(r['imagined_updates'])} runs"
@@ -192,14 +288,10 @@ def table5_finding(env: str, algos: dict[str, dict]) -> str:
         for a, r in algos.items()
         if r.get("imagined_updates") and 0 in r["imagined_updates"]
     ]
-    imagined += (
+    return text + (
         f" {'; '.join(idle)}: PPO learns from the imaginary memory only once it holds a full batch."
         if idle
         else ""
-    )
-    return (
-        f"Table 5, {env}: mean episodes to the top {ours} ({tests}). Reached: "
-        f"{reached}{unreached}: {verdict}.{imagined}"
     )
 
 

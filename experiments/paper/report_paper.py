@@ -16,6 +16,7 @@ from experiments.paper.report_format import (
     budget,
     by_env,
     fmt,
+    holm,
     inconclusive,
     iqm,
     mann_whitney_p,
@@ -242,12 +243,16 @@ def figure9_section(data: dict) -> Section:
         "from the same initialisation at every K. ![figure 9](figure9/figure9.png)"
     )
     section = Section(TITLES["figure9"], [intro])
+    raw = {(panel["env"], k): p for panel in data["panels"] for k, p in figure9_p(panel).items()}
+    adjusted = holm(raw)
+    family = sum(p is not None for p in raw.values())
     for panel in data["panels"]:
         section.blocks += [
             f"**{panel['env']}** ({panel['seeds']} seeds, {budget(panel)} each):",
             figure9_table(panel),
         ]
-        section.findings += figure9_findings(panel)
+        mine = {k: adjusted[env, k] for env, k in adjusted if env == panel["env"]}
+        section.findings += figure9_findings(panel, mine, family)
     pending = data.get("pending", [])
     if pending:
         section.blocks.append(Bullets([f"{p['env']}: pending ({p['reason']})." for p in pending]))
@@ -279,24 +284,46 @@ def figure9_table(panel: dict) -> Table:
     return Table(header, rows)
 
 
-def figure9_findings(panel: dict) -> list[str]:
-    """Which K is best: fewest episodes to threshold, or (no threshold) the highest final
-    moving return; with Mann-Whitney tests of the best against the others. The verdict says
-    its power, as Table 5's does: REPRODUCED only where K = 1 is best and significantly so
-    against each other K (p < 0.05); NOT reproduced where another K is significantly better
-    than K = 1 at the paper's budget; otherwise inconclusive, with the budget where it is
-    below the paper's."""
+def _figure9_measure(panel: dict) -> tuple[dict, str, str, dict, float | None]:
+    """The panel's rows by K, the per-seed key compared, what it is, the mean per K and the
+    best K: fewest episodes to threshold, or (no threshold) the highest final moving return
+    (None where no K has a mean)."""
     rows = {r["k"]: r for r in panel["rows"]}
     if panel["threshold"] is not None:
-        key, better, what = "episodes_to_threshold", min, "mean episodes to threshold"
+        key, pick, what = "episodes_to_threshold", min, "mean episodes to threshold"
         means = {k: r["mean"] for k, r in rows.items() if r["mean"] is not None}
     else:
-        key, better, what = "final_moving_returns", max, "mean final moving return"
+        key, pick, what = "final_moving_returns", max, "mean final moving return"
         means = {k: r["final_moving_return"]["mean"] for k, r in rows.items()}
         means = {k: m for k, m in means.items() if m is not None}
-    if not means:
+    best = pick(means, key=means.get) if means else None
+    return rows, key, what, means, best
+
+
+def figure9_p(panel: dict) -> dict[float, float | None]:
+    """The raw two-sided Mann-Whitney p of the panel's best K against each other K: the
+    comparisons its verdict tests, `{K: p}`."""
+    rows, key, _, means, best = _figure9_measure(panel)
+    return {k: mann_whitney_p(rows[best][key], rows[k][key]) for k in means if k != best}
+
+
+def figure9_findings(
+    panel: dict, adjusted: dict[float, float | None] | None = None, family: int | None = None
+) -> list[str]:
+    """Which K is best: fewest episodes to threshold, or (no threshold) the highest final
+    moving return; with Mann-Whitney tests of the best against the others, Holm-adjusted over
+    the figure's `family` of comparisons (`adjusted`: per K; without it, over this panel's).
+    The verdict reads the adjusted p and says its power, as Table 5's does: REPRODUCED only
+    where K = 1 is best and significantly so against each other K (adjusted p < 0.05); NOT
+    reproduced where another K is significantly better than K = 1 at the paper's budget;
+    otherwise inconclusive, with the budget where it is below the paper's."""
+    rows, _, what, means, best = _figure9_measure(panel)
+    if best is None:
         return []
-    best = better(means, key=means.get)
+    raw = figure9_p(panel)
+    if adjusted is None:
+        adjusted = holm(raw)
+        family = sum(p is not None for p in raw.values())
     trained = [r["episodes_per_seed"] for r in panel["rows"] if "episodes_per_seed" in r]
     if trained:  # the episodes the runs took; the least-trained K sets the budget's power
         short = inconclusive(panel["env"], min(trained))
@@ -306,12 +333,13 @@ def figure9_findings(panel: dict) -> list[str]:
             steps = float(panel["budget"].split()[0].replace(",", ""))
         short = inconclusive(panel["env"], None if steps else panel.get("episodes"), steps)
     text = ", ".join(f"K={k:g}: {m:.0f}" for k, m in means.items())
-    tests, p = [], {}
-    for k in means:
-        p[k] = None if k == best else mann_whitney_p(rows[best][key], rows[k][key])
-        if p[k] is not None:
-            tests.append(f"K={best:g} vs K={k:g}: p = {p[k]:.2g}")
-    noise = f" (Mann-Whitney {'; '.join(tests)})" if tests else ""
+    p = {k: adjusted.get(k) for k in raw}
+    tests = [
+        f"K={best:g} vs K={k:g}: p = {raw[k]:.2g}, adjusted {p[k]:.2g}"
+        for k in raw
+        if raw[k] is not None
+    ]
+    noise = f" (Mann-Whitney, Holm over {family} comparisons: {'; '.join(tests)})" if tests else ""
     others = [k for k in means if k != best]
     shown = bool(others) and all(p[k] is not None and p[k] < 0.05 for k in others)
     worse = best != 1.0 and 1.0 in means and p[1.0] is not None and p[1.0] < 0.05
