@@ -8,7 +8,7 @@ stable-baselines3 "gymnasium[mujoco]"`). Trains one seed on gymnasium's v5 task 
 VecNormalize (observations and rewards), then plays 5 greedy episodes (env seeds 100-104) and
 prints one JSON line: task, seed, steps, training seconds, the greedy returns and their mean.
 Its lines are kept, dated, in experiments/results/locomotion/sb3_zoo_ppo.jsonl, which the
-locomotion study sets beside our runs (REPORT.md); docs/tuning-mujoco.md discusses them.
+locomotion study sets beside our runs (REPORT.md); docs/logs/tuning-mujoco.md discusses them.
 """
 
 from __future__ import annotations

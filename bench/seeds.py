@@ -167,7 +167,7 @@ def mjx_halfcheetah(counts=SEED_COUNTS, seconds: float = 45.0, algo: str = "ppo"
     counts, each trained for about `seconds` of wall time after its compile: env steps/s once
     warm, compile seconds, and at the largest count the wall time until the mean moving
     return first reached `MJX_TARGET` (None if it did not within the time). `bench/gpu.sh`
-    runs it on a GPU; on CPU MJX is the slow engine (docs/benchmarks.md, "MuJoCo engines")."""
+    runs it on a GPU; on CPU MJX is the slow engine (docs/logs/benchmarks.md, "MuJoCo engines")."""
     rows = []
     for seeds in counts:
         config = from_preset(

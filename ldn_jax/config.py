@@ -327,7 +327,7 @@ class ModelConfig:
     the learner's own (`AgentConfig.epochs`). Imagined rows are fresh every iteration, so
     fewer passes over more of them is a trade the learner's epochs, chosen for scarce real
     rows, do not make: at halfcheetah's 20 epochs, imagination and its updates are the
-    largest share of a branched run's time (docs/imagination.md)."""
+    largest share of a branched run's time (docs/logs/imagination.md)."""
     probabilistic: bool = False
     """Each member of the ensemble (`ld` "ensemble" or "variance") outputs a Gaussian over
     the standardised next observation and reward, fitted by negative log-likelihood with
@@ -341,7 +341,7 @@ class ModelConfig:
     """`probabilistic`, one of `IMAGINED_STEPS`: "sample" (MBPO's, PETS's): a draw from the
     Gaussian of one elite picked at random; "mean": the elites' mean prediction, no draw (a
     simulator is deterministic, and the drawn noise is about half of a hopper model's
-    one-step reward error: docs/imagination.md)."""
+    one-step reward error: docs/logs/imagination.md)."""
     world: str = "model"
     """One of `WORLDS`. "model": imagined steps are the model's predictions (the method).
     "true", for studies: the real simulator stepped from each imagined observation stands in

@@ -179,7 +179,7 @@ _ONE_MUJOCO_ROLLOUT = {"iteration_steps": 100, "learners": {"ppo": {"iteration_s
 
 PRESETS["branched"] = {
     # Ours: imagination branched from real states in a probabilistic ensemble (docs/training.md,
-    # "Branched imagination"; the measurements that chose it: docs/imagination.md).
+    # "Branched imagination"; the measurements that chose it: docs/logs/imagination.md).
     "schedule": "steps",
     "k": (1.0,),
     "model.imagine_start": "real",
@@ -200,7 +200,7 @@ PRESETS["branched"] = {
     "envs": {
         # A model fit and an imagined batch every 8 workers x 100 real steps (halfcheetah's
         # PPO: x 128, two of its 64-step rollouts).
-        # The pendulum's cut: 15 steps (docs/imagination.md).
+        # The pendulum's cut: 15 steps (docs/logs/imagination.md).
         "inverted_pendulum": {"iteration_steps": 100, "model.horizon": 15},
         # halfcheetah's cut (ppo-ldn's cap): 15 (the measurements: docs/defaults.md, "The
         # branched preset").

@@ -151,3 +151,21 @@ def test_the_choice_table_is_what_validate_accepts():
         with pytest.raises(ValueError):
             validate(from_preset("paper", **{"env": "cartpole-v1", **overrides}))
     assert Config().model.stop is None  # the algorithm's own rule: not one of the names
+
+
+def test_the_user_guide_holds_no_dated_log():
+    """Dated measurement logs live under docs/logs/, in the navigation's section of their own;
+    the user guide's pages have no dated section."""
+    import yaml
+
+    nav = yaml.safe_load((ROOT / "mkdocs.yml").read_text())["nav"]
+    guide = [page for item in nav for page in item.values() if isinstance(page, str)]
+    logs = [page for item in nav for v in item.values() if isinstance(v, list) for page in v]
+    assert guide and logs
+    assert all(page.startswith("logs/") for entry in logs for page in entry.values())
+    assert not any(page.startswith("logs/") for page in guide)
+    for page in guide:
+        dated = re.findall(r"^#+ .*\b20\d\d-\d\d-\d\d", (ROOT / "docs" / page).read_text(), re.M)
+        assert not dated, (page, dated)
+    on_disk = {f"logs/{p.name}" for p in (ROOT / "docs" / "logs").glob("*.md")}
+    assert on_disk == {page for entry in logs for page in entry.values()}

@@ -9,7 +9,7 @@ from ldn_jax.config import from_preset, validate
 BUDGETS = {"inverted_pendulum": 30_000, "hopper": 200_000, "halfcheetah": 200_000}
 """Real env steps per seed of each env's runs. inverted_pendulum's runs stop once solved
 (`SOLVED`), 87 of the study's 100 inside 30k; a longer budget would only move the 13 that
-never did (docs/imagination.md)."""
+never did (docs/logs/imagination.md)."""
 
 
 SOLVED = {"inverted_pendulum": 900.0}

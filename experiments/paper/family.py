@@ -83,7 +83,7 @@ def section(rows: list[dict]) -> str:
         "episodes); imagined steps are per seed over the run (a model-based run that imagined "
         "nothing learnt as A2C does); wall s is the run's training and compile seconds as "
         "the trainer measured them on a shared machine, an upper bound on its cost alone "
-        "(docs/tuning-mujoco.md says what ran beside each). Curves: "
+        "(docs/logs/tuning-mujoco.md says what ran beside each). Curves: "
         "![family](family/family.png)",
         "",
         "| task | algorithm | real steps, mean | seeds | final moving return | per seed "

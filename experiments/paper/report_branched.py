@@ -135,7 +135,7 @@ TARGETS = {
     "halfcheetah": {"final_moving_return": 3000.0, "eval_return": 5000.0},
     "hopper": {"final_moving_return": 2000.0, "eval_return": 2000.0},
 }
-"""The branched preset's targets at 200k steps (docs/imagination.md): a model-based rule's
+"""The branched preset's targets at 200k steps (docs/logs/imagination.md): a model-based rule's
 IQM, per measure; on both tasks also P(> PPO) above `TARGET_P`."""
 
 
