@@ -229,7 +229,7 @@ def _prefix(trainer: Trainer, stages: int):
         if stages >= 2:
             state, _ = trainer.model_stage(state, real, k_model)
         if stages >= 3:
-            state, _ = trainer.imagine_stage(state, k_imagine, gain)
+            state, _ = trainer.imagine_stage(state, k_imagine, gain, real)
         return state, real.returns.sum()
 
     return run
@@ -278,7 +278,8 @@ def stages(algo: str, runs: int = 30, warm_episodes: int = 400, env: str = "cart
     split = jax.vmap(jax.vmap(lambda key: jax.random.split(key, 4)))
     _, k_real, k_model, k_imagine = jnp.moveaxis(split(states.key), -1, 0)
     stage = lambda fn: jax.jit(jax.vmap(jax.vmap(fn)))
-    after_real, episodes = stage(trainer.real_stage)(states, k_real)
+    after_real, real = stage(trainer.real_stage)(states, k_real)
+    episodes = real.episodes
     flat = lambda w: w.reshape((-1, *w.shape[2:]))
     n_steps = config.agent.n_steps
     share, computed = _masked_share(flat(episodes.steps.weight), n_steps)
@@ -292,9 +293,9 @@ def stages(algo: str, runs: int = 30, warm_episodes: int = 400, env: str = "cart
         "real_steps_computed": computed,
     }
     if trainer.dynamics is not None:
-        after_model, _ = stage(trainer.model_stage)(after_real, episodes, k_model)
+        after_model, _ = stage(trainer.model_stage)(after_real, real, k_model)
         grid_gains = jnp.broadcast_to(gains[:, None], states.env_steps.shape)
-        _, imagined = stage(trainer.imagine_stage)(after_model, k_imagine, grid_gains)
+        _, imagined = stage(trainer.imagine_stage)(after_model, k_imagine, grid_gains, real)
         share, computed = _masked_share(flat(imagined.steps.weight), n_steps)
         row["imagined_masked_share"] = round(share, 3)
         row["imagined_steps_computed"] = computed
@@ -325,12 +326,12 @@ def branched_stages(
     def prefix(stages: int):
         def run(state, gain):
             _, k_real, k_model, k_imagine = jax.random.split(state.key, 4)
-            state, real, _ = trainer.real_steps(state, k_real)
+            state, real = trainer.real_stage(state, k_real)
             if stages >= 2:
                 state, _ = trainer.model_stage(state, real, k_model)
             if stages >= 3:
-                state, _ = trainer.branch_stage(state, k_imagine, gain, real)
-            return state, real.returns.sum()
+                state, _ = trainer.imagine_stage(state, k_imagine, gain, real)
+            return state, real.episodes.returns.sum()
 
         return run
 

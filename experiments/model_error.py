@@ -38,6 +38,7 @@ import jax.numpy as jnp
 
 from experiments.paper.shadow import load_run
 from ldn_jax.learning_degree import ensemble_mean
+from ldn_jax.stages.imagine import world_of
 
 TASKS = ("halfcheetah", "hopper", "walker2d")
 
@@ -74,7 +75,7 @@ def seed_errors(trainer, state, key, steps: int, starts: int, recent: int) -> li
     # Units: each dimension's std over the whole buffer (the newest states alone can hold a
     # dimension nearly still once the policy is nearly deterministic).
     scale = jnp.std(buffer.data.obs[:size], axis=0) + 1e-6
-    model = trainer._model_world(state, jnp.float32(1.0))
+    model = world_of(trainer.parts, state, jnp.float32(1.0))
     true = true_world(trainer.env, trainer.env_params)
     learner, live = trainer.learner, jnp.ones(starts, bool)
     imagined, real, rows = obs, obs, []
@@ -171,7 +172,7 @@ def action_ranking(trainer, state, key, steps: int, starts: int, actions: int, r
     picked = buffer.data.obs[jax.random.randint(k_start, (starts,), max(0, size - recent), size)]
     obs = jnp.repeat(picked, actions, axis=0)  # [starts * actions, d]: each start's copies
     rows = obs.shape[0]
-    model = trainer._model_world(state, jnp.float32(1.0))
+    model = world_of(trainer.parts, state, jnp.float32(1.0))
     true = true_world(trainer.env, trainer.env_params)
     learner, params, live = trainer.learner, state.learner.params, jnp.ones(rows, bool)
     gamma = trainer.config.agent.gamma

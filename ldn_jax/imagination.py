@@ -16,7 +16,7 @@ member's own predicted variance ("variance").
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from dataclasses import dataclass
 
 import jax
 import jax.numpy as jnp
@@ -42,35 +42,42 @@ from ldn_jax.rollout import WorldStep
 Array = jax.Array
 
 
+@dataclass(frozen=True)
+class EnvFacts:
+    """What an imagined world takes from the real env."""
+
+    is_terminal: Callable
+    """`obs -> terminated`: the env's own test, applied to predicted observations."""
+    model_action: Callable
+    """Encodes the env action as the model takes it (one-hot, or the clipped vector)."""
+    env_reward: Callable | None = None
+    """`(obs, action, next_obs) -> reward`, if not None, replaces the model's reward (the LD
+    still reads the models' whole output)."""
+    true_step: Callable | None = None
+    """`(key, obs, action) -> (next_obs, reward, terminated)`, if not None: the real env
+    stepped from the imagined observations (`ModelConfig.world` other than "model")."""
+    true_state: bool = True
+    """With `true_step`: its next observation replaces the model's ("true", "true-state")."""
+    true_reward: bool = True
+    """With `true_step`: its reward replaces the model's ("true", "true-reward")."""
+
+
 def model_world(
-    dynamics: Dynamics,
-    model: ModelState,
-    is_terminal: Any,
-    model_action: Any,
-    env_reward: Any,
-    gain: Array,
-    stop: StopRule,
-    true_step: Any = None,
-    true_state: bool = True,
-    true_reward: bool = True,
-    penalty: Array | float = 0.0,
+    dynamics: Dynamics, model: ModelState, facts: EnvFacts, gain: Array, stop: StopRule
 ) -> WorldStep:
     """A world that steps M1 (an ensemble: its members' mean prediction). Its extras carry
     each step's learning degree `ld`.
 
-    `true_step(key, obs, action) -> (next_obs, reward, terminated)`, if not None, is the real
-    env stepped from the imagined observations (`ModelConfig.world` "true"): it gives each
-    step in place of the model's prediction, which the learning degree and `stop` still read.
-    Its termination always replaces the model's; `true_state` False keeps the model's next
-    observation ("true-reward"), `true_reward` False the model's reward ("true-state"; with
-    `env_reward`, the exact reward of the model's predicted transition).
+    `facts.true_step`, if not None, gives each step in place of the model's prediction,
+    which the learning degree and `stop` still read. Its termination always replaces the
+    model's; `true_state` False keeps the model's next observation ("true-reward"),
+    `true_reward` False the model's reward ("true-state"; with `env_reward`, the exact
+    reward of the model's predicted transition).
 
-    `penalty` (`ModelConfig.penalty`) is subtracted from each step's reward times the
-    estimator's statistic before scale and window (MOPO's pessimism).
+    The model's `penalty` (`ModelConfig.penalty`) is subtracted from each step's reward times
+    the estimator's statistic before scale and window (MOPO's pessimism).
 
-    `env_reward(obs, action, next_obs)`, if not None, replaces the model's reward (the LD
-    still reads the models' whole output). `model_action` encodes the env action as the
-    model takes it (one-hot, or the clipped vector). The deviation of eq. 3 is taken in the
+    The deviation of eq. 3 is taken in the
     model's normalised output space (the raw one when normalisation is off), so no
     observation dimension dominates it by its units; so is an ensemble's disagreement.
     `stop` is the stopping rule (`stop_rule`). A prediction outside the real data's box
@@ -82,7 +89,9 @@ def model_world(
     deviation is scaled by `ld_scale` before the window and K.
     """
     estimate, degree = LD_ESTIMATES[dynamics.config.ld]
-    scale = dynamics.config.ld_scale
+    scale, penalty = dynamics.config.ld_scale, dynamics.config.penalty
+    is_terminal, model_action, env_reward = facts.is_terminal, facts.model_action, facts.env_reward
+    true_step = facts.true_step
 
     def step(key: Array, world: Array | None, obs: Array, action: Array, alive: Array):
         encoded = model_action(action)
@@ -100,9 +109,9 @@ def model_world(
         if true_step is not None:
             k_true = jax.random.fold_in(key, TRUE_STREAM)
             true_obs, true_rewards, terminated = true_step(k_true, obs, action)
-            if true_reward:
+            if facts.true_reward:
                 reward = true_rewards
-            if true_state:
+            if facts.true_state:
                 next_obs, outside = true_obs, jnp.zeros_like(outside)
         if not (isinstance(penalty, float) and penalty == 0.0):  # a sweep's value is traced
             reward = reward - penalty * uncertainty

@@ -217,38 +217,46 @@ def play_episodes(
     every `n_steps` steps (unless `player.learn` is False). An episode ends on `terminated`,
     on `truncated`, or after `player.max_steps` steps; the loop ends once every worker's
     has."""
-    return _play(key, learner_state, player, obs, world, None, None, None)
+    return _play(key, learner_state, player, obs, world, Batch())
+
+
+@dataclass(frozen=True)
+class Batch:
+    """How `play_batch` lays out its episodes (fields may hold traced arrays)."""
+
+    reset: Reset | None = None
+    """`reset(key) -> (obs, world)`: the next episode's start once one ends; None: each
+    worker plays one episode (`play_episodes`)."""
+    quota: Array | None = None
+    """`[W]` int: worker w plays `quota[w]` episodes one after the other (none: all its rows
+    weight 0), then idles masked."""
+    segments: int | None = None
+    """The most segments played (default: one episode's, `max_steps` rounded up), where the
+    episode still running is cut."""
+    rows: Array | None = None
+    """(may be traced) instead of until every worker has ended an episode, segments are
+    played until at least this many rows (n x W per segment) have been, at most `segments`
+    (branched imagination's quota of imagined steps)."""
 
 
 def play_batch(
     key: Array,
     learner_state: LearnerState,
     player: Player,
-    obs: Array,
-    world: Any,
-    reset: Reset,
-    quota: Array | None = None,
-    segments: int | None = None,
-    rows: Array | None = None,
+    start: tuple[Array, Any],
+    batch: Batch,
 ) -> tuple[LearnerState, Episodes]:
-    """Episodes back to back on each of W workers: the first from `obs` and `world`, each
-    next one from `reset` as soon as one ends, so every row of the batch is live. Segments
-    are played until every worker has ended an episode (at least one segment). An episode
-    still running at the batch's end is cut there: its last step bootstraps, as at any
-    segment's end.
-
-    `quota` (`[W]` int): worker w plays `quota[w]` episodes one after the other (none: all
-    its rows weight 0), then idles masked; at most `segments` segments (default: one
-    episode's, `max_steps` rounded up), where the episode still running is cut.
-    `rows` (may be traced): instead of until every worker has ended an episode, segments
-    are played until at least this many rows (n x W per segment) have been, at most
-    `segments` (branched imagination's quota of imagined steps).
-    """
-    return _play(key, learner_state, player, obs, world, reset, quota, segments, rows)
+    """Episodes back to back on each of W workers: the first from `start` = (obs, world),
+    each next one from `batch.reset` as soon as one ends, so every row of the batch is live.
+    Segments are played until every worker has ended an episode (at least one segment), or
+    as `batch` says. An episode still running at the batch's end is cut there: its last step
+    bootstraps, as at any segment's end."""
+    return _play(key, learner_state, player, *start, batch)
 
 
-def _play(key, learner_state, player, obs, world, reset, quota, segments, rows=None):
+def _play(key, learner_state, player, obs, world, batch: Batch):
     """`play_episodes` (no `reset`) and `play_batch`."""
+    reset, quota, segments, rows = batch.reset, batch.quota, batch.segments, batch.rows
     learner, max_steps = player.learner, player.max_steps
     n_steps = learner.config.n_steps
     n_segments = segments or math.ceil(max_steps / n_steps)

@@ -195,7 +195,7 @@ def test_a_branch_starts_from_a_state_in_the_real_buffer():
     buffer = buffer.replace(data=buffer.data.replace(obs=buffer.data.obs * 0.001))
     state = state.replace(buffer=buffer)
     _, real = jax.jit(trainer.real_stage)(state, jax.random.key(3))
-    _, episodes = jax.jit(trainer.branch_stage)(state, jax.random.key(4), jnp.float32(1.0), real)
+    _, episodes = jax.jit(trainer.imagine_stage)(state, jax.random.key(4), jnp.float32(1.0), real)
     steps = episodes.steps
     starts = np.concatenate([np.ones((1, steps.done.shape[1]), bool), np.asarray(steps.done[:-1])])
     known = set(np.round(np.asarray(buffer.data.obs[:23, 0]) * 1000).astype(int))
@@ -213,7 +213,7 @@ def test_a_branch_starts_from_a_state_in_the_real_buffer():
         assert (time <= 4).all()
     # `model.start_window`: every branch starts from one of the newest 5 transitions.
     trainer = Trainer(_config(model={"start_window": 5}))
-    _, episodes = jax.jit(trainer.branch_stage)(state, jax.random.key(4), jnp.float32(1.0), real)
+    _, episodes = jax.jit(trainer.imagine_stage)(state, jax.random.key(4), jnp.float32(1.0), real)
     steps = episodes.steps
     starts = np.concatenate([np.ones((1, steps.done.shape[1]), bool), np.asarray(steps.done[:-1])])
     live = starts & (np.asarray(steps.weight) > 0)  # the unplayed rest of the batch is zeros
@@ -230,7 +230,7 @@ def _stages(trainer: Trainer):
         buffer=buffer.replace(data=buffer.data.replace(obs=buffer.data.obs * 0.01))
     )
     real_state, real = jax.jit(trainer.real_stage)(state, jax.random.key(3))
-    after, _ = jax.jit(trainer.branch_stage)(state, jax.random.key(4), jnp.float32(1.0), real)
+    after, _ = jax.jit(trainer.imagine_stage)(state, jax.random.key(4), jnp.float32(1.0), real)
     return state, real_state, after
 
 

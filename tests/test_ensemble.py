@@ -19,7 +19,7 @@ from ldn_jax.host import checkpoint
 from ldn_jax.host.run_dir import FINAL as FINAL_CHECKPOINT
 from ldn_jax.host.run_dir import read_config as read_run_config
 from ldn_jax.host.training import train
-from ldn_jax.imagination import model_world, stop_rule
+from ldn_jax.imagination import EnvFacts, model_world, stop_rule
 from ldn_jax.learners.a2c import A2C
 from ldn_jax.learning_degree import (
     ERROR_FLOOR,
@@ -160,7 +160,7 @@ def _world(members_equal: bool, ld_stop: bool, error_scale: float):
     never_terminal = lambda obs: jnp.zeros(obs.shape[:-1], bool)
     encode = lambda a: jax.nn.one_hot(a, 2)
     gain = jnp.float32(1.0)
-    world = model_world(dynamics, model, never_terminal, encode, None, gain, _rule(ld_stop))
+    world = model_world(dynamics, model, EnvFacts(never_terminal, encode), gain, _rule(ld_stop))
     return dynamics, model, world
 
 

@@ -55,8 +55,7 @@ def test_gae_matches_a_python_loop_with_terminations_and_truncations():
         *(jnp.asarray(x, jnp.float32) for x in (reward, value, next_value)),
         jnp.asarray(terminated),
         jnp.asarray(done),
-        0.97,
-        0.9,
+        (0.97, 0.9),
     )
     want = _gae_loop(reward, value, next_value, terminated, done, 0.97, 0.9)
     np.testing.assert_allclose(np.asarray(got), want, rtol=1e-5, atol=1e-5)
@@ -68,7 +67,7 @@ def test_gae_truncation_bootstraps_and_termination_does_not():
     next_value = jnp.full((1, 2), 10.0)
     done = jnp.array([[True, True]])
     terminated = jnp.array([[False, True]])  # worker 0 truncated (LD stop), worker 1 terminal
-    got = np.asarray(gae(reward, value, next_value, terminated, done, 0.5, 0.95))
+    got = np.asarray(gae(reward, value, next_value, terminated, done, (0.5, 0.95)))
     np.testing.assert_allclose(got, [[1.0 + 0.5 * 10.0, 1.0]])
 
 

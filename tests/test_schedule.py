@@ -18,7 +18,7 @@ from ldn_jax.host import checkpoint
 from ldn_jax.host.metrics import run_crossing, threshold_crossing
 from ldn_jax.host.run_dir import read_config as read_run_config
 from ldn_jax.host.training import Interrupted, train
-from ldn_jax.rollout import Player, play_batch
+from ldn_jax.rollout import Batch, Player, play_batch
 from ldn_jax.trainer import Trainer
 from tests.test_resume import StopAfter, _lines
 from tests.test_scale import _run
@@ -40,7 +40,7 @@ def played():
     trainer = Trainer(config)
     state = trainer.init_state(jax.random.key(0))
     iteration = jax.jit(lambda s: trainer.iteration(s, 1.0))
-    real = jax.jit(lambda s: trainer.real_steps(s, jax.random.split(s.key, 4)[1])[1])
+    real = jax.jit(lambda s: trainer.real_stage(s, jax.random.split(s.key, 4)[1])[1].episodes)
     states, metrics, weights = [state], [], []
     for _ in range(6):
         weights.append(real(state).steps.weight)
@@ -226,8 +226,9 @@ def test_a_quota_of_imagined_episodes_plays_each_workers_owed_episodes(played):
     reset = lambda key: (obs, jnp.zeros(4, jnp.int32))
     params = learner.init(jax.random.key(0))
     player = Player(learner, world_step, 1000, learn=False)
+    batch = Batch(reset=reset, quota=quota, segments=2)
     _, episodes = play_batch(
-        jax.random.key(1), params, player, obs, jnp.zeros(4, jnp.int32), reset, quota, segments=2
+        jax.random.key(1), params, player, (obs, jnp.zeros(4, jnp.int32)), batch
     )
     np.testing.assert_array_equal(episodes.lengths, [0, 3, 6, 20])
     np.testing.assert_array_equal(episodes.ended, [0, 1, 2, 6])

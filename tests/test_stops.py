@@ -12,6 +12,7 @@ from ldn_jax.dynamics import Dynamics
 from ldn_jax.host import flags
 from ldn_jax.host.settings import UsageError
 from ldn_jax.imagination import (
+    EnvFacts,
     imagined_steps_limit,
     m2ac_kept,
     model_world,
@@ -20,6 +21,7 @@ from ldn_jax.imagination import (
 )
 from ldn_jax.learners.a2c import A2C
 from ldn_jax.rollout import Player, play_episodes
+from ldn_jax.stages.imagine import world_of
 from ldn_jax.trainer import Trainer
 
 NEVER = lambda obs: jnp.zeros(obs.shape[:-1], bool)
@@ -34,7 +36,7 @@ def _play(config: ModelConfig, rule, workers=8, max_steps=50):
     if config.ld == "ensemble":
         model = model.replace(error_scale=jnp.float32(1e-4))
     learner = A2C(AgentConfig(), obs_size=4, action_spec=2)
-    world = model_world(dynamics, model, NEVER, ENCODE, None, jnp.float32(1.0), rule)
+    world = model_world(dynamics, model, EnvFacts(NEVER, ENCODE), jnp.float32(1.0), rule)
     obs = jax.random.uniform(jax.random.key(2), (workers, 4), minval=-0.05, maxval=0.05)
     limit = imagined_steps_limit(config, config.stop or "none", max_steps)
     _, episodes = jax.jit(play_episodes, static_argnums=2)(
@@ -98,7 +100,7 @@ def test_the_oracle_steps_the_real_cartpole_from_imagined_states():
     trainer = Trainer(from_preset("paper", env="cartpole-v1", algo="ldn", seeds=1))
     obs = jnp.array([[0.0, 0.0, 0.0, 0.0], [0.01, 0.1, -0.02, 0.3]])
     action = jnp.array([0, 1])
-    truth = trainer._true_next(jax.random.key(0), obs, action)
+    truth = trainer.parts.real.true_next(jax.random.key(0), obs, action)
     physics = jax.vmap(lambda o, a: trainer.env.step(
         jax.random.key(0), trainer.env.from_observation(o, trainer.env_params), a,
         trainer.env_params)[0])(obs, action)  # fmt: skip
@@ -121,10 +123,10 @@ def test_a_true_world_steps_the_real_env_where_the_model_would_and_still_reads_t
         )
         trainer = Trainer(config)
         state = jax.tree.map(lambda x: x[0, 0], trainer.init_batch())
-        step = trainer._model_world(state, jnp.float32(1.0))
+        step = world_of(trainer.parts, state, jnp.float32(1.0))
         steps[world] = step(key, None, obs, action, alive)
     next_obs, _, reward, terminated, _, extras = steps["true"]
-    truth, true_reward, true_term = trainer._true_step(jax.random.key(9), obs, action)
+    truth, true_reward, true_term = trainer.parts.real.true_step(jax.random.key(9), obs, action)
     np.testing.assert_array_equal(np.asarray(next_obs), np.asarray(truth))
     np.testing.assert_array_equal(np.asarray(reward), np.asarray(true_reward))
     np.testing.assert_array_equal(np.asarray(terminated), [False, False, True])
@@ -268,7 +270,7 @@ def test_a_penalty_takes_its_weight_times_the_ensembles_disagreement_from_each_r
         trainer = Trainer(validate(config))
         state = jax.tree.map(lambda x: x[0, 0], trainer.init_batch())
         state = state.replace(model=state.model.replace(error_scale=jnp.float32(0.01)))
-        world = trainer._model_world(state, jnp.float32(1.0))
+        world = world_of(trainer.parts, state, jnp.float32(1.0))
         history = jnp.full((3, 2), 5.0)  # earlier steps' deviations in the window
         steps[penalty] = world(key, history, obs, action, alive)
     dynamics, model = trainer.dynamics, state.model

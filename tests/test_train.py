@@ -8,9 +8,9 @@ import pytest
 from ldn_jax.buffer import Transitions, buffer_add, buffer_init
 from ldn_jax.config import AgentConfig, ModelConfig, from_preset
 from ldn_jax.dynamics import MIN_WIDTH, Dynamics
-from ldn_jax.imagination import model_world, stop_rule
+from ldn_jax.imagination import EnvFacts, model_world, stop_rule
 from ldn_jax.learners.a2c import A2C
-from ldn_jax.rollout import Player, play_batch, play_episodes
+from ldn_jax.rollout import Batch, Player, play_batch, play_episodes
 from ldn_jax.trainer import Trainer
 
 
@@ -34,7 +34,9 @@ def _play_scripted(end_at, terminal, n_steps, max_steps, reset=False):
     player = Player(learner, _scripted_world(end_at, terminal), max_steps)
     params = learner.init(jax.random.key(0))
     if reset:
-        return play_batch(jax.random.key(1), params, player, *start, lambda key: start)[1]
+        return play_batch(jax.random.key(1), params, player, start, Batch(reset=lambda key: start))[
+            1
+        ]
     return play_episodes(jax.random.key(1), params, player, *start)[1]
 
 
@@ -121,7 +123,7 @@ def _imagine(ld_stop, trained, bounds=None):
     never_terminal = lambda obs: jnp.zeros(obs.shape[:-1], bool)
     encode = lambda a: jax.nn.one_hot(a, 2)
     gain = jnp.float32(1.0)
-    world = model_world(dynamics, model, never_terminal, encode, None, gain, _rule(ld_stop))
+    world = model_world(dynamics, model, EnvFacts(never_terminal, encode), gain, _rule(ld_stop))
     obs = jax.random.uniform(jax.random.key(2), (64, 4), minval=-0.05, maxval=0.05)
     _, episodes = jax.jit(play_episodes, static_argnums=2)(
         jax.random.key(3), learner.init(jax.random.key(4)), Player(learner, world, 50), obs, None
@@ -265,7 +267,9 @@ def test_observation_statistics_count_every_real_step_and_no_imagined_one():
 def test_imagined_batch_fills_a_whole_segment_with_back_to_back_episodes():
     trainer = Trainer(_config(model={"imagine": "batch"}))
     state = trainer.init_state(jax.random.key(0))  # M1 == M0: LD 0, every episode 1 step
-    _, episodes = jax.jit(trainer.imagine_stage)(state, jax.random.key(1), jnp.float32(1.0))
+    _, real = jax.jit(trainer.real_stage)(state, jax.random.key(2))
+    imagine = jax.jit(trainer.imagine_stage)
+    _, episodes = imagine(state, jax.random.key(1), jnp.float32(1.0), real)
     n_steps, workers = trainer.config.agent.n_steps, trainer.config.workers
     weight = np.asarray(episodes.steps.weight)
     assert (weight[:n_steps] == 1).all() and (weight[n_steps:] == 0).all()

@@ -35,16 +35,17 @@ def gae(
     next_value: Array,
     terminated: Array,
     done: Array,
-    gamma: float,
-    lam: float,
+    discounts: tuple[float, float],
 ) -> Array:
-    """Generalised advantage estimates of one segment, `[n, W] -> [n, W]`.
+    """Generalised advantage estimates of one segment, `[n, W] -> [n, W]`, with `discounts`
+    = (gamma, lambda).
 
     delta_t = r_t + gamma * (1 - terminated_t) * V(s'_t) - V(s_t);
     A_t = delta_t + gamma * lam * (1 - done_t) * A_{t+1}, and A_{n} = 0 past the segment.
     A truncation (time limit, LD stop) bootstraps from V(s'_t) and ends the recursion; a
     termination does neither.
     """
+    gamma, lam = discounts
     delta = reward + gamma * (1.0 - terminated.astype(reward.dtype)) * next_value - value
 
     def backward(following, step):
@@ -114,8 +115,7 @@ class PPO(ActorCritic):
             next_value,
             segment.terminated,
             segment.done,
-            cfg.gamma,
-            cfg.gae_lambda,
+            (cfg.gamma, cfg.gae_lambda),
         )
         log_prob, _ = self.log_prob_entropy(params, segment.obs, segment.action)
         rows = Batch(

@@ -1,0 +1,30 @@
+"""The model's stage: the real transitions into the buffer R, then M1's fit on it."""
+
+from __future__ import annotations
+
+import jax
+
+from ldn_jax.buffer import Transitions, buffer_add
+from ldn_jax.rollout import Episodes
+from ldn_jax.stages.parts import Parts, TrainState
+
+Array = jax.Array
+
+
+def fit(parts: Parts, state: TrainState, real: Episodes, key: Array) -> tuple[TrainState, Array]:
+    """The iteration's real steps (`[T, W, ...]`, those of weight > 0) into R, and
+    `model.updates` minibatch steps of M1 on R; the fit's loss."""
+    steps = real.steps
+    flat = lambda x: x.reshape((-1, *x.shape[2:]))
+    batch = Transitions(
+        obs=flat(steps.obs),
+        action=flat(parts.model_action(steps.action)),
+        next_obs=flat(steps.next_obs),
+        reward=flat(steps.reward),
+    )
+    buffer = buffer_add(state.buffer, batch, flat(steps.weight) > 0)
+    value = None
+    if parts.config.model.value_loss:
+        value = lambda obs: parts.learner.value(state.learner.params, obs)
+    model, loss = parts.dynamics.fit(state.model, buffer, key, value)
+    return state.replace(model=model, buffer=buffer), loss
