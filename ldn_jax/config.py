@@ -236,7 +236,8 @@ class ModelConfig:
     inverted_pendulum, halfcheetah, hopper, walker2d).
     "none": only predicted termination and the step limit (A3C-Model)."""
     horizon: int = 5
-    """`stop` "horizon": imagined steps per episode (MBPO's h; h in {1, 5, 25} is the study)."""
+    """`stop` "horizon": imagined steps per episode from initial states (MBPO's h; h in
+    {1, 5, 25} is the study). Branches are cut by `cut`."""
     m2ac_keep: float = 0.5
     """`stop` "m2ac": the share of running imagined rollouts kept at each step."""
     macura_quantile: float = 0.95
@@ -278,13 +279,16 @@ class ModelConfig:
     """Where an imagined rollout starts, one of `IMAGINE_STARTS`.
     "initial": a fresh initial state of the env (Algorithm 1, line 17; the paper's).
     "real" (ours, branched in the style of MBPO): a state drawn uniformly from the real
-    buffer R. `branches` rollouts run side by side, each cut after `horizon` steps (stop
+    buffer R. `branches` rollouts run side by side, each cut after `cut` steps (stop
     "mbpo": its scheduled horizon) or sooner by `stop`, as a truncation, and followed at
     once by another from a fresh draw, until the iteration has imagined `imagined_ratio`
     steps per real step (whole segments). The learner updates on every n steps of the
     `branches` rollouts, so every update is a full batch; `imagine` is not read."""
     branches: int = 64
     """`imagine_start` "real": the imagined rollouts played side by side."""
+    cut: int = 5
+    """`imagine_start` "real": a branch is cut after this many steps (stop "mbpo": after its
+    scheduled horizon instead), or sooner by `stop`."""
     start_window: int = 0
     """`imagine_start` "real": branches start from states of the newest `start_window` real
     transitions in R; 0 draws from all of R (MBPO's way, for an off-policy learner). An
@@ -588,10 +592,19 @@ class Config:
         if data.get("env") == "reacher" and "max_steps" not in data:
             data["max_steps"] = 1000  # a run from before reacher took gymnasium's 50 steps
         agent = AgentConfig(**data.pop("agent", {}))
-        model = ModelConfig(**data.pop("model", {}))
+        model = ModelConfig(**_branch_cut(data.pop("model", {})))
         data["k"] = tuple(data.get("k", (1.0,)))
         data["sweep"] = tuple((name, tuple(values)) for name, values in data.get("sweep", ()))
         return cls(**data, agent=agent, model=model)
+
+
+def _branch_cut(model: dict) -> dict:
+    """A model section as this version reads it: a run from before `cut` was its own field
+    cut its branches at `horizon`."""
+    if model.get("imagine_start") == "real" and "cut" not in model:
+        model = {**model, "cut": model.get("horizon", ModelConfig.horizon)}
+        model.pop("horizon", None)
+    return model
 
 
 from_preset = Config.from_preset
@@ -914,6 +927,7 @@ def validate(config: Config) -> Config:
         ),
         (config.model.ensemble >= 2, f"ensemble size must be >= 2, got {config.model.ensemble}"),
         (model.horizon >= 1, f"horizon must be >= 1, got {model.horizon}"),
+        (model.cut >= 1, f"cut must be >= 1, got {model.cut}"),
         (
             model.imagine_start in IMAGINE_STARTS,
             f"unknown imagine_start {model.imagine_start!r}; valid: {', '.join(IMAGINE_STARTS)}",
@@ -1088,6 +1102,11 @@ def _stop_checks(config: Config) -> list[tuple[bool, str]]:
             stop not in ENSEMBLE_RULES or model.ld == "ensemble",
             f"stop {stop!r} reads the disagreement of an ensemble of models: it needs ld "
             "'ensemble' (its default)",
+        ),
+        (
+            stop != "horizon" or model.imagine_start != "real",
+            "stop 'horizon' cuts imagined episodes from initial states; a branch's cut is "
+            "--cut (model.cut)",
         ),
         (
             stop != "macura" or model.imagine_start == "real",

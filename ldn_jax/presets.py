@@ -196,17 +196,17 @@ PRESETS["branched"] = {
     "model.branches": 32,
     "model.imagined_ratio": 4.0,
     "model.real_share": 0.05,
-    "model.horizon": 5,
+    "model.cut": 5,
     "envs": {
         # A model fit and an imagined batch every 8 workers x 100 real steps (halfcheetah's
         # PPO: x 128, two of its 64-step rollouts).
         # The pendulum's cut: 15 steps (docs/logs/imagination.md).
-        "inverted_pendulum": {"iteration_steps": 100, "model.horizon": 15},
+        "inverted_pendulum": {"iteration_steps": 100, "model.cut": 15},
         # halfcheetah's cut (ppo-ldn's cap): 15 (the measurements: docs/defaults.md, "The
         # branched preset").
         "halfcheetah": {
             "iteration_steps": 100,
-            "model.horizon": 15,
+            "model.cut": 15,
             "learners": {"ppo": {"iteration_steps": 128}},
         },
         # hopper's imagined rows train the critic only (docs/defaults.md, "The branched

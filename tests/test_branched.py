@@ -36,7 +36,7 @@ BRANCHED = {
     "hidden_layers": 2,
     "branches": 6,
     "imagined_ratio": 2.0,
-    "horizon": 4,
+    "cut": 4,
     "updates": 5,
 }
 """A small branched config for CartPole (probabilistic ensemble of 3, 2 elites)."""
@@ -203,7 +203,7 @@ def test_a_branch_starts_from_a_state_in_the_real_buffer():
     assert len(first) > steps.done.shape[1]  # rollouts ended and new ones began
     assert set(np.round(first * 1000).astype(int)) <= known
     # Every row played is live (the rest of the batch's room is left unplayed) and every
-    # rollout is cut at the horizon (4) at the latest.
+    # rollout is cut at the cut (4) at the latest.
     weight = np.asarray(steps.weight)
     played = weight.any(axis=1)
     assert played.sum() % trainer.config.agent.n_steps == 0 and (weight[played] == 1).all()
@@ -523,3 +523,36 @@ def test_the_m0_reading_of_a_probabilistic_ensemble_is_eq3_on_the_drawn_member()
         expected = 0.5 * float(jnp.mean(jnp.square(m1 - m0)))
         assert expected > 1e-4
         assert float(sigma2[row]) == pytest.approx(expected, rel=1e-5)
+
+
+def test_the_branch_cut_is_its_own_flag_and_horizon_keeps_its_meaning():
+    config = _build("--env", "halfcheetah", "--algo", "ppo-ldn", "--preset", "branched")
+    assert (config.model.cut, config.model.horizon) == (15, 5)
+    config = _build(
+        "--env", "halfcheetah", "--algo", "ppo-ldn", "--preset", "branched", "--cut", "7"
+    )
+    assert config.model.cut == 7
+    for argv, needle in [
+        (["--algo", "ldn", "--cut", "7"], "--cut needs branches"),
+        (["--algo", "ppo-model", "--preset", "branched", "--cut", "0"], "cut must be >= 1"),
+        (["--algo", "ppo-model", "--preset", "branched", "--stop", "horizon"], "is --cut"),
+        (["--algo", "ppo-model", "--preset", "branched", "--horizon", "9"], "needs --stop"),
+    ]:
+        with pytest.raises(UsageError, match=needle):
+            _build(*argv)
+
+
+def test_a_run_from_before_the_cut_field_reads_its_horizon_as_the_cut():
+    """config.json of a branched run written before `model.cut` existed: its horizon was
+    the branch cut, so it loads as that cut (and a cached run of it is the same config)."""
+    from ldn_jax.config import Config
+
+    new = from_preset("branched", env="halfcheetah", algo="ppo-ldn", steps=1000)
+    old = new.to_dict()
+    cut = old["model"].pop("cut")
+    old["model"] = {**old["model"], "horizon": cut}
+    assert old["model"]["horizon"] == 15
+    assert Config.from_dict(old) == new
+    initial = from_preset("paper", env="cartpole-v1", algo="ldn").to_dict()
+    initial["model"].pop("cut")
+    assert Config.from_dict(initial).model.cut == ModelConfig.cut

@@ -19,10 +19,10 @@ def test_the_arms_are_the_plans():
         assert configs[env, "ppo"].agent.epochs == epochs
         assert configs[env, "ppo-steps"].agent.epochs == 2 * epochs
         assert configs[env, "ppo-steps"].model == configs[env, "ppo"].model
-        cap = configs[env, "ppo-ldn"].model.horizon
+        cap = configs[env, "ppo-ldn"].model.cut
         assert cap == {"halfcheetah": 15, "hopper": 5}[env]
         assert configs[env, "ppo-model"].stop_rule == "none"
-        assert configs[env, "ppo-model"].model.horizon == cap
+        assert configs[env, "ppo-model"].model.cut == cap
         assert configs[env, "ppo-ldn"].model.ld == "ensemble"
         m0 = configs[env, "ppo-ldn-m0"]
         assert m0.model.ld == "m0" and m0.stop_rule == "ld" and m0.model.probabilistic

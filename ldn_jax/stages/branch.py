@@ -1,6 +1,6 @@
 """Branched imagination (`model.imagine_start` "real", ours, in the style of MBPO): `branches`
 rollouts in M1 side by side, each from a state drawn from the real buffer R and cut after the
-horizon (or sooner by the stop rule), the next drawn as one ends, until the iteration has
+`cut` (or sooner by the stop rule), the next drawn as one ends, until the iteration has
 imagined `imagined_ratio` steps per real step; the learner updates on every n steps of them,
 with `real_share` of real rows beside. What those updates may move is `ImaginedUpdates`."""
 
@@ -79,7 +79,7 @@ def branches(
         threshold = _macura_threshold(parts, state, obs, k_first)
     world = world_of(parts, state, gain, threshold)
     played = real.episodes.lengths.sum()
-    horizon = config.horizon
+    horizon = config.cut
     if rule == "mbpo":
         horizon = scheduled_horizon(config, state.env_steps + played)
     updates = ImaginedUpdates.of(config)
