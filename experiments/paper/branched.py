@@ -141,7 +141,7 @@ def recorded(runs: Path, row: dict) -> bool:
     """Whether every run a row is made of has a committed record (`cache.record_of`)."""
     dirs = run_dirs(runs, row["env"], row["rule"], len(row["eval_return"]), row["steps"])
     records = [cache.record_of(run) for _, _, run in dirs]
-    return all(r is not None and (r / "summary.json").is_file() for r in records)
+    return all(r is not None and RunDir(r).summary_file.is_file() for r in records)
 
 
 def _earlier(path: Path) -> list[dict]:

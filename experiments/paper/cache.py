@@ -131,9 +131,10 @@ def progress(config: Config, out: Path) -> dict:
 # A MuJoCo run at 1M steps costs minutes to an hour, and its directory (checkpoints, buffers)
 # does not belong in git: a finished one leaves a record, the few files the paper's scripts
 # read, that can be committed, so a long scale such as cpu-full accumulates over machines.
-RECORD_FILES = ("config.json", "history.npz", "summary.json")
-"""A record's files, written in this order (the summary last: a record counts once it is
-there)."""
+HISTORY_FILE = "history.npz"
+"""A record's per-iteration metrics (`RunDir.history`); its config and summary keep the run
+directory's names (`RunDir.config_file`, `RunDir.summary_file`), and the summary is written
+last: a record counts once it is there."""
 
 
 def record_of(out: Path) -> Path | None:
@@ -148,7 +149,7 @@ def record_of(out: Path) -> Path | None:
 def _recorded(out: Path) -> Path | None:
     """`out`'s record if one is there (whatever its config)."""
     record = record_of(out)
-    return record if record is not None and (record / "summary.json").is_file() else None
+    return record if record is not None and RunDir(record).summary_file.is_file() else None
 
 
 def has_finished(out: Path) -> bool:
@@ -162,7 +163,7 @@ def finished_summary(out: Path) -> dict | None:
     if RunDir(out).is_finished():
         return RunDir(out).read_summary()
     record = _recorded(out)
-    return None if record is None else json.loads((record / "summary.json").read_text())
+    return None if record is None else RunDir(record).read_summary()
 
 
 def _recorded_summary(config: Config, out: Path) -> dict | None:
@@ -170,9 +171,9 @@ def _recorded_summary(config: Config, out: Path) -> dict | None:
     record = _recorded(out)
     if config.env not in MUJOCO or record is None:
         return None
-    if not _same_config(json.loads((record / "config.json").read_text()), config):
+    if not _same_config(json.loads(RunDir(record).config_file.read_text()), config):
         return None
-    return json.loads((record / "summary.json").read_text())
+    return RunDir(record).read_summary()
 
 
 def _keep_record(config: Config, out: Path) -> None:
@@ -180,16 +181,17 @@ def _keep_record(config: Config, out: Path) -> None:
     record = record_of(out)
     if config.env not in MUJOCO or record is None:
         return
-    if _recorded(out) and _same_config(json.loads((record / "config.json").read_text()), config):
+    kept = RunDir(record)
+    if _recorded(out) and _same_config(json.loads(kept.config_file.read_text()), config):
         return
     run = RunDir(out)
     record.mkdir(parents=True, exist_ok=True)
-    (record / "summary.json").unlink(missing_ok=True)
-    shutil.copyfile(run.config_file, record / "config.json")
-    np.savez_compressed(record / "history.npz", **run.history())
-    temporary = record / "summary.json.tmp"
+    kept.summary_file.unlink(missing_ok=True)
+    shutil.copyfile(run.config_file, kept.config_file)
+    np.savez_compressed(record / HISTORY_FILE, **run.history())
+    temporary = kept.summary_file.with_name(kept.summary_file.name + ".tmp")
     shutil.copyfile(run.summary_file, temporary)
-    temporary.replace(record / "summary.json")
+    temporary.replace(kept.summary_file)
 
 
 def _same_config(stored: dict, config: Config) -> bool:
@@ -248,7 +250,7 @@ def load_history(out: Path) -> dict[str, np.ndarray]:
     directory holds no finished run."""
     record = _recorded(out)
     if record is not None and not RunDir(out).is_finished():
-        with np.load(record / "history.npz") as history:
+        with np.load(record / HISTORY_FILE) as history:
             return {name: history[name] for name in history.files}
     return RunDir(out).history()
 

@@ -26,6 +26,7 @@ import numpy as np
 from experiments.paper import cache, common
 from ldn_jax.config import from_preset, validate
 from ldn_jax.host import stats
+from ldn_jax.host.run_dir import RunDir
 
 ZOO = {
     "halfcheetah": 5819.0,
@@ -42,7 +43,7 @@ TITLE = "PPO on the locomotion tasks against the zoo"
 
 SB3_RUNS = "sb3_zoo_ppo.jsonl"
 """Beside locomotion.json: SB3's PPO with the zoo's constants trained on these cores, one JSON
-line per task and seed as `bench/sb3_ppo.py TASK SEED STEPS` prints it (greedy returns of 5
+line per task and seed as `baselines/sb3_ppo.py TASK SEED STEPS` prints it (greedy returns of 5
 gymnasium episodes), appended by hand with the date; the 1M-step lines are set beside ours."""
 
 
@@ -102,7 +103,7 @@ def side_by_side(rows: list[dict], sb3: dict[str, list[dict]]) -> list[str]:
         return []
     lines = [
         "Side by side on these cores: SB3's PPO with the zoo's constants for the task "
-        f"(`bench/sb3_ppo.py`, 1M steps; `locomotion/{SB3_RUNS}`), each seed's greedy return "
+        f"(`baselines/sb3_ppo.py`, 1M steps; `locomotion/{SB3_RUNS}`), each seed's greedy return "
         "the mean of 5 gymnasium episodes, against ours above; P(ours better) is the chance "
         "that a seed of ours scores above a seed of theirs, with its bootstrap interval.",
         "",
@@ -219,7 +220,7 @@ def main(argv: list[str] | None = None) -> int:
 def _write(out: Path, record: Path, rows: list[dict], results: Path) -> None:
     for row in rows:  # a row recorded before rows kept their curve: from its run, if at hand
         run = run_dir(results, row["env"], row["seeds"])
-        if "curve" not in row and (run / "summary.json").exists():
+        if "curve" not in row and RunDir(run).summary_file.exists():
             row["curve"] = kept_curve(cache.load_history(run))
     (out / "locomotion.md").write_text(section(rows, sb3_runs(out)))
     common.write_json(record, {"machine": common.machine(), "rows": rows})

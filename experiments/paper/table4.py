@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import sys
 
-from experiments.paper import cache, common
+from experiments.paper import cache, common, plots
 
 ENVS = ("ant", "halfcheetah", "hopper", "reacher", "walker2d", "inverted_pendulum")
 ALGOS = ("a2c-model", "ldn")
@@ -56,7 +56,7 @@ def main(argv: list[str] | None = None) -> int:
             for r in table
         ],
     )
-    common.mujoco_curves(entries, out / "table4.png", "Table 4: A3C-Model vs MBRL-LDN")
+    plots.mujoco_curves(entries, out / "table4.png", "Table 4: A3C-Model vs MBRL-LDN")
     pending = sum(r["status"] == "pending" for r in table)
     print(f"wrote {out}/table4.json, table4.csv, table4.png ({pending}/{len(table)} pending)")
     return 0

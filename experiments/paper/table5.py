@@ -17,7 +17,7 @@ import sys
 
 import numpy as np
 
-from experiments.paper import cache, common
+from experiments.paper import cache, common, plots
 from ldn_jax.host.metrics import run_crossing
 
 ENVS = ("inverted_pendulum", "halfcheetah", "hopper")
@@ -129,7 +129,7 @@ def main(argv: list[str] | None = None) -> int:
         ],
     )
     tops = {r["env"]: r["top"] for r in table if r["status"] == "done"}
-    common.mujoco_curves(entries, out / "table5.png", "Table 5: PPO2 family", levels=tops)
+    plots.mujoco_curves(entries, out / "table5.png", "Table 5: PPO2 family", levels=tops)
     pending = sum(r["status"] == "pending" for r in table)
     print(f"wrote {out}/table5.json, table5.csv, table5.png ({pending}/{len(table)} pending)")
     return 0

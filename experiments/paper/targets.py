@@ -32,6 +32,7 @@ import numpy as np
 from experiments.paper import cache, common, locomotion
 from ldn_jax.config import from_preset, validate
 from ldn_jax.host.metrics import run_crossing
+from ldn_jax.host.run_dir import RunDir
 
 PENDULUM_ALGOS = ("a2c", "a2c-model", "ldn", "ppo", "ppo-model", "ppo-ldn")
 PENDULUM_LEVEL = 900.0
@@ -205,7 +206,7 @@ def _earlier(record: dict) -> dict[str, dict]:
 
 def _finished(run: Path) -> str:
     """The day a run finished training (its summary file's), as the result files date it."""
-    stamp = (run / "summary.json").stat().st_mtime
+    stamp = RunDir(run).summary_file.stat().st_mtime
     return datetime.datetime.fromtimestamp(stamp, datetime.UTC).date().isoformat()
 
 
