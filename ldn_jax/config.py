@@ -797,8 +797,32 @@ def validate(config: Config) -> Config:
         envs.make(config.env)  # raises the registry's one-line error
     if config.algo not in ALGORITHMS:
         raise ValueError(f"unknown algo {config.algo!r}; valid algos: {', '.join(ALGORITHMS)}")
-    agent, model = config.agent, config.model
     checks = [
+        *_run_checks(config),
+        *_agent_checks(config),
+        *_model_checks(config),
+        *_degree_checks(config),
+        *_stop_checks(config),
+        *_branch_checks(config),
+        *_imagined_update_checks(config),
+    ]
+    for ok, message in checks:
+        if not ok:
+            raise ValueError(message)
+    # Every check holds whatever the algorithm: a value no run could use is refused even where
+    # this run would not read it (a2c has no model, yet model.hidden=-5 is an error).
+    for name, kind in fields().items():
+        value = get_field(config, name)
+        not_a_float = kind.base is not float or kind.sequence or value is None
+        if not (not_a_float or math.isfinite(value)):
+            raise ValueError(f"{name} must be a finite number, got {value}")
+    _validate_sweep(config)
+    return config
+
+
+def _run_checks(config: Config) -> list[tuple[bool, str]]:
+    """The checks of the run as a whole: seeds, K, budget, schedule, engine."""
+    return [
         (config.seeds >= 1, f"seeds must be >= 1, got {config.seeds}"),
         (config.first_seed >= 0, f"first_seed must be >= 0, got {config.first_seed}"),
         (
@@ -851,6 +875,13 @@ def validate(config: Config) -> Config:
         (0 < config.moving_decay < 1, "moving_decay must be in (0, 1)"),
         (config.eval_episodes >= 1, "eval_episodes must be >= 1"),
         (config.chunk_iterations >= 1, "chunk_iterations must be >= 1"),
+    ]
+
+
+def _agent_checks(config: Config) -> list[tuple[bool, str]]:
+    """The checks of `AgentConfig`: the learner's nets and constants."""
+    agent = config.agent
+    return [
         (0 < config.agent.gamma <= 1, f"gamma must be in (0, 1], got {config.agent.gamma}"),
         (config.agent.n_steps >= 1, "n_steps must be >= 1"),
         (agent.actor_hidden >= 1, f"actor_hidden must be >= 1, got {agent.actor_hidden}"),
@@ -875,8 +906,6 @@ def validate(config: Config) -> Config:
         (agent.rmsprop_eps > 0, f"rmsprop_eps must be > 0, got {agent.rmsprop_eps}"),
         (agent.adam_eps > 0, f"adam_eps must be > 0, got {agent.adam_eps}"),
         (agent.value_coef >= 0, f"value_coef must be >= 0, got {agent.value_coef}"),
-        (model.hidden >= 1, f"model hidden must be >= 1, got {model.hidden}"),
-        (model.init_std > 0, f"model init_std must be > 0, got {model.init_std}"),
         (
             config.agent.reward_scale > 0 and math.isfinite(config.agent.reward_scale),
             f"reward_scale must be > 0 and finite, got {config.agent.reward_scale}",
@@ -897,6 +926,15 @@ def validate(config: Config) -> Config:
             config.agent.target_kl is None or config.agent.target_kl > 0,
             f"target_kl must be > 0 (or None: no stop), got {config.agent.target_kl}",
         ),
+    ]
+
+
+def _model_checks(config: Config) -> list[tuple[bool, str]]:
+    """The checks of the model's net and its fit (`ModelConfig`)."""
+    model = config.model
+    return [
+        (model.hidden >= 1, f"model hidden must be >= 1, got {model.hidden}"),
+        (model.init_std > 0, f"model init_std must be > 0, got {model.init_std}"),
         (config.model.activation in ACTIVATIONS, f"model activation must be one of {ACTIVATIONS}"),
         (config.model.lr > 0, "model lr must be > 0"),
         (config.model.updates >= 0, "model updates must be >= 0"),
@@ -904,9 +942,48 @@ def validate(config: Config) -> Config:
             config.model.value_loss >= 0,
             f"model value_loss must be >= 0, got {config.model.value_loss}",
         ),
-        (config.model.penalty >= 0, f"model penalty must be >= 0, got {config.model.penalty}"),
         (config.model.batch_size >= 1, "model batch_size must be >= 1"),
         (config.model.buffer_capacity >= 1, "buffer_capacity must be >= 1"),
+        (config.model.ensemble >= 2, f"ensemble size must be >= 2, got {config.model.ensemble}"),
+        (model.hidden_layers >= 1, f"model hidden_layers must be >= 1, got {model.hidden_layers}"),
+        (
+            model.elites is None or 1 <= model.elites <= model.ensemble,
+            f"elites must be in [1, ensemble size {model.ensemble}] (or none: all), got "
+            f"{model.elites}",
+        ),
+        (
+            model.imagined_step in IMAGINED_STEPS,
+            f"unknown imagined_step {model.imagined_step!r}; valid: {', '.join(IMAGINED_STEPS)}",
+        ),
+        (
+            model.imagined_step == "sample" or model.probabilistic,
+            "imagined_step 'mean' is a probabilistic ensemble's: it needs model.probabilistic",
+        ),
+        (model.world in WORLDS, f"unknown world {model.world!r}; valid: {', '.join(WORLDS)}"),
+        (
+            model.world == "model" or _observes_state(config.env),
+            f"world {model.world!r} steps the real env from imagined observations, and "
+            f"{config.env}'s observation is not its whole state{OBSERVES_STATE}",
+        ),
+        (
+            config.model.action_encoding in ACTION_ENCODINGS,
+            f"unknown action_encoding {config.model.action_encoding!r}; valid: "
+            + ", ".join(ACTION_ENCODINGS),
+        ),
+        (
+            config.model.action_encoding == "one-hot" or not _continuous(config.env),
+            "action_encoding is for discrete actions; continuous ones go to the model as "
+            "the clipped vector",
+        ),
+    ]
+
+
+def _degree_checks(config: Config) -> list[tuple[bool, str]]:
+    """The checks of the learning degree's reading, the stopping rules' parameters, pessimism
+    and the support box."""
+    model = config.model
+    return [
+        (config.model.penalty >= 0, f"model penalty must be >= 0, got {config.model.penalty}"),
         (
             config.model.support is None
             or (config.model.support >= 0 and math.isfinite(config.model.support)),
@@ -925,8 +1002,46 @@ def validate(config: Config) -> Config:
             config.model.ld in LD_ESTIMATORS,
             f"unknown ld {config.model.ld!r}; valid: {', '.join(LD_ESTIMATORS)}",
         ),
-        (config.model.ensemble >= 2, f"ensemble size must be >= 2, got {config.model.ensemble}"),
         (model.horizon >= 1, f"horizon must be >= 1, got {model.horizon}"),
+        (
+            model.penalty == 0 or model.ld in ("ensemble", "variance"),
+            "model penalty reads an ensemble's uncertainty (M1's deviation from M0 grows with "
+            "what it has learned, not with what it does not know): set ld 'ensemble' or "
+            "'variance'",
+        ),
+        (
+            model.penalty == 0 or model.world == "model",
+            f"model penalty is pessimism about the model's steps, and world {model.world!r} "
+            "takes the real env's; use world 'model'",
+        ),
+        (
+            1 <= model.horizon_min <= model.horizon_max,
+            f"the horizon schedule needs 1 <= horizon_min <= horizon_max, got "
+            f"{model.horizon_min} and {model.horizon_max}",
+        ),
+        (
+            0 <= model.horizon_from <= model.horizon_to,
+            f"the horizon schedule needs 0 <= horizon_from <= horizon_to, got "
+            f"{model.horizon_from} and {model.horizon_to}",
+        ),
+        (
+            0 < model.macura_quantile <= 1,
+            f"macura_quantile must be in (0, 1], got {model.macura_quantile}",
+        ),
+        (model.macura_scale > 0, f"macura_scale must be > 0, got {model.macura_scale}"),
+        (
+            model.ld != "variance" or model.probabilistic,
+            "ld 'variance' reads the members' predicted variance: it needs model.probabilistic",
+        ),
+        (0 < model.m2ac_keep <= 1, f"m2ac_keep must be in (0, 1], got {model.m2ac_keep}"),
+        (model.oracle_error > 0, f"oracle_error must be > 0, got {model.oracle_error}"),
+    ]
+
+
+def _branch_checks(config: Config) -> list[tuple[bool, str]]:
+    """The checks of where imagination starts and how much of it there is (branches)."""
+    model = config.model
+    return [
         (model.cut >= 1, f"cut must be >= 1, got {model.cut}"),
         (
             model.imagine_start in IMAGINE_STARTS,
@@ -945,6 +1060,23 @@ def validate(config: Config) -> Config:
             f"imagine_start 'real' branches imagined rollouts, and {config.algo} imagines "
             "none; use a model-based algorithm (-model or -ldn)",
         ),
+        (model.imagined_ratio > 0, f"imagined_ratio must be > 0, got {model.imagined_ratio}"),
+        (0 <= model.real_share < 1, f"real_share must be in [0, 1), got {model.real_share}"),
+        (
+            config.model.imagine in IMAGINE_MODES,
+            f"unknown imagine {config.model.imagine!r}; valid: {', '.join(IMAGINE_MODES)}",
+        ),
+        (
+            config.model.imagine != "memory" or config.algorithm.learner == "ppo",
+            "imagine 'memory' needs the PPO learner (A2C learns on every n steps as it plays)",
+        ),
+    ]
+
+
+def _imagined_update_checks(config: Config) -> list[tuple[bool, str]]:
+    """The checks of what updates on branched imagination's rows may move."""
+    model = config.model
+    return [
         (
             model.imagined_std in IMAGINED_STD,
             f"unknown imagined_std {model.imagined_std!r}; valid: {', '.join(IMAGINED_STD)}",
@@ -954,17 +1086,6 @@ def validate(config: Config) -> Config:
             or (model.imagine_start == "real" and config.agent.log_std_init is not None),
             "imagined_std 'real' needs branched imagination (imagine_start 'real') and a "
             "policy with a state-independent log std (agent.log_std_init)",
-        ),
-        (
-            model.penalty == 0 or model.ld in ("ensemble", "variance"),
-            "model penalty reads an ensemble's uncertainty (M1's deviation from M0 grows with "
-            "what it has learned, not with what it does not know): set ld 'ensemble' or "
-            "'variance'",
-        ),
-        (
-            model.penalty == 0 or model.world == "model",
-            f"model penalty is pessimism about the model's steps, and world {model.world!r} "
-            "takes the real env's; use world 'model'",
         ),
         (
             model.imagined_updates in IMAGINED_UPDATES,
@@ -996,81 +1117,7 @@ def validate(config: Config) -> Config:
             f"imagined_epochs sets PPO's epochs; {config.algo} is of the A2C family, which "
             "makes one update per segment",
         ),
-        (model.imagined_ratio > 0, f"imagined_ratio must be > 0, got {model.imagined_ratio}"),
-        (0 <= model.real_share < 1, f"real_share must be in [0, 1), got {model.real_share}"),
-        (
-            1 <= model.horizon_min <= model.horizon_max,
-            f"the horizon schedule needs 1 <= horizon_min <= horizon_max, got "
-            f"{model.horizon_min} and {model.horizon_max}",
-        ),
-        (
-            0 <= model.horizon_from <= model.horizon_to,
-            f"the horizon schedule needs 0 <= horizon_from <= horizon_to, got "
-            f"{model.horizon_from} and {model.horizon_to}",
-        ),
-        (
-            0 < model.macura_quantile <= 1,
-            f"macura_quantile must be in (0, 1], got {model.macura_quantile}",
-        ),
-        (model.macura_scale > 0, f"macura_scale must be > 0, got {model.macura_scale}"),
-        (model.hidden_layers >= 1, f"model hidden_layers must be >= 1, got {model.hidden_layers}"),
-        (
-            model.elites is None or 1 <= model.elites <= model.ensemble,
-            f"elites must be in [1, ensemble size {model.ensemble}] (or none: all), got "
-            f"{model.elites}",
-        ),
-        (
-            model.ld != "variance" or model.probabilistic,
-            "ld 'variance' reads the members' predicted variance: it needs model.probabilistic",
-        ),
-        (
-            model.imagined_step in IMAGINED_STEPS,
-            f"unknown imagined_step {model.imagined_step!r}; valid: {', '.join(IMAGINED_STEPS)}",
-        ),
-        (
-            model.imagined_step == "sample" or model.probabilistic,
-            "imagined_step 'mean' is a probabilistic ensemble's: it needs model.probabilistic",
-        ),
-        (model.world in WORLDS, f"unknown world {model.world!r}; valid: {', '.join(WORLDS)}"),
-        (
-            model.world == "model" or _observes_state(config.env),
-            f"world {model.world!r} steps the real env from imagined observations, and "
-            f"{config.env}'s observation is not its whole state{OBSERVES_STATE}",
-        ),
-        (0 < model.m2ac_keep <= 1, f"m2ac_keep must be in (0, 1], got {model.m2ac_keep}"),
-        (model.oracle_error > 0, f"oracle_error must be > 0, got {model.oracle_error}"),
-        *_stop_checks(config),
-        (
-            config.model.action_encoding in ACTION_ENCODINGS,
-            f"unknown action_encoding {config.model.action_encoding!r}; valid: "
-            + ", ".join(ACTION_ENCODINGS),
-        ),
-        (
-            config.model.action_encoding == "one-hot" or not _continuous(config.env),
-            "action_encoding is for discrete actions; continuous ones go to the model as "
-            "the clipped vector",
-        ),
-        (
-            config.model.imagine in IMAGINE_MODES,
-            f"unknown imagine {config.model.imagine!r}; valid: {', '.join(IMAGINE_MODES)}",
-        ),
-        (
-            config.model.imagine != "memory" or config.algorithm.learner == "ppo",
-            "imagine 'memory' needs the PPO learner (A2C learns on every n steps as it plays)",
-        ),
     ]
-    for ok, message in checks:
-        if not ok:
-            raise ValueError(message)
-    # Every check holds whatever the algorithm: a value no run could use is refused even where
-    # this run would not read it (a2c has no model, yet model.hidden=-5 is an error).
-    for name, kind in fields().items():
-        value = get_field(config, name)
-        not_a_float = kind.base is not float or kind.sequence or value is None
-        if not (not_a_float or math.isfinite(value)):
-            raise ValueError(f"{name} must be a finite number, got {value}")
-    _validate_sweep(config)
-    return config
 
 
 def _stop_checks(config: Config) -> list[tuple[bool, str]]:
