@@ -13,13 +13,11 @@ locomotion study sets beside our runs (REPORT.md); docs/logs/tuning-mujoco.md di
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 
-import gymnasium as gym
-import numpy as np
 import torch
+from sb3_play import greedy_returns, report
 from stable_baselines3 import PPO
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import VecNormalize
@@ -65,19 +63,7 @@ def main() -> None:
     start = time.time()
     model.learn(steps)
     seconds = time.time() - start
-    env.training, env.norm_reward = False, False
-    play, returns = gym.make(env_id, **env_kwargs), []
-    for episode in range(5):
-        obs, _ = play.reset(seed=100 + episode)
-        done, total = False, 0.0
-        while not done:
-            action, _ = model.predict(env.normalize_obs(obs[None]), deterministic=True)
-            obs, reward, terminated, truncated, _ = play.step(action[0])
-            total, done = total + float(reward), terminated or truncated
-        returns.append(total)
-    print(json.dumps({"task": task, "seed": seed, "steps": steps, "train_seconds": round(seconds),
-                      "returns": [round(r, 1) for r in returns],
-                      "mean": round(float(np.mean(returns)), 1)}))  # fmt: skip
+    report(task, seed, steps, seconds, greedy_returns(model, env, env_id, env_kwargs))
 
 
 if __name__ == "__main__":
