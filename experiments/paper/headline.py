@@ -11,7 +11,7 @@ replays each finished run's greedy policy in gymnasium (`ldn-jax eval`'s episode
 its optimiser steps from the final checkpoint, into `headline/runs/ENV-ARM.json` (committed:
 the checkpoints are not). `--report` trains nothing and rebuilds `headline.json`,
 `headline.md` and `headline.png` from those files and the records. Each run's file names the
-commits that trained it.
+commits that trained it: each process's HEAD when it started.
 """
 
 from __future__ import annotations
@@ -88,7 +88,9 @@ def run_dir(results: Path, env: str, arm: str, seeds: int, first: int, steps: in
 
 
 def code_version() -> str:
-    """HEAD's commit, with "+dirty" where the package's files differ from it."""
+    """HEAD's commit, with "+dirty" where the package's files differ from it. Read once, when
+    the process starts (`main`): the process trains with the code it imported then, whatever
+    is committed while it runs."""
     git = lambda *a: subprocess.run(
         ["git", *a], cwd=common.ROOT, capture_output=True, text=True, check=False
     ).stdout.strip()
@@ -122,7 +124,7 @@ def adam_steps(out: Path, config: Config) -> dict[str, list[int]]:
     return counts
 
 
-def ensure(env: str, arm: str, args: argparse.Namespace) -> None:
+def ensure(env: str, arm: str, args: argparse.Namespace, code: str) -> None:
     """Train (or resume, or reuse) one arm's run, then write its file: commits, gymnasium
     returns, optimiser steps."""
     config = config_of(env, arm, args.seeds, args.first_seed, args.steps)
@@ -130,8 +132,8 @@ def ensure(env: str, arm: str, args: argparse.Namespace) -> None:
     file = common.out_dir(args.results, "headline/runs") / f"{out.name}.json"
     kept = json.loads(file.read_text()) if file.exists() else {}
     commits = kept.get("commits", [])
-    if not cache.has_finished(out) and code_version() not in commits:
-        commits = [*commits, code_version()]
+    if not cache.has_finished(out) and code not in commits:
+        commits = [*commits, code]
         write_json(file, {**kept, "env": env, "arm": arm, "commits": commits})
     summary = cache.ensure_run(config, out)
     if kept.get("train_seconds") == summary["train_seconds"] and "gymnasium" in kept:
@@ -307,10 +309,11 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         parser.error(f"unknown env or arm: {', '.join(unknown)}")
     if not args.report:
+        code = code_version()
         common.compile_cache(args.results)
         for env in envs:
             for arm in arms:
-                ensure(env, arm, args)
+                ensure(env, arm, args, code)
                 report(args)
     report(args)
     return 0
