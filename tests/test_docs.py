@@ -107,7 +107,13 @@ def test_the_readme_headline_rows_have_a_record_per_arm():
 
     rows = [cells for cells in _readme_results() if "records/headline" in cells[-1]]
     assert rows
-    scored = sorted((ROOT / "experiments/results/headline/runs").glob("*.json"))
+    scored = sorted((ROOT / "experiments/results/headline/arms").glob("*.json"))
+    assert scored  # the study's per-arm files are committed, not ignored
+    if (ROOT / ".git").exists() and shutil.which("git"):
+        ignored = subprocess.run(
+            ["git", "check-ignore", "-q", str(scored[0])], cwd=ROOT, check=False
+        ).returncode
+        assert ignored == 1, f"{scored[0]} is git-ignored"
     for file in scored:
         if "gymnasium" in file.read_text():
             record = ROOT / "experiments/results/records/headline" / file.stem

@@ -8,7 +8,7 @@ real data, the `branched` preset's branches cut at its cap with no rule, the pre
 Trains every run (one vmapped program of seeds 10-19 per arm and env, 200k real steps;
 resumed when interrupted, reused when finished; the records under `records/headline/`), then
 replays each finished run's greedy policy in gymnasium (`ldn-jax eval`'s episodes) and counts
-its optimiser steps from the final checkpoint, into `headline/runs/ENV-ARM.json` (committed:
+its optimiser steps from the final checkpoint, into `headline/arms/ENV-ARM.json` (committed:
 the checkpoints are not). `--report` trains nothing and rebuilds `headline.json`,
 `headline.md` and `headline.png` from those files and the records. Each run's file names the
 commits that trained it: each process's HEAD when it started.
@@ -129,7 +129,7 @@ def ensure(env: str, arm: str, args: argparse.Namespace, code: str) -> None:
     returns, optimiser steps."""
     config = config_of(env, arm, args.seeds, args.first_seed, args.steps)
     out = run_dir(args.results, env, arm, args.seeds, args.first_seed, args.steps)
-    file = common.out_dir(args.results, "headline/runs") / f"{out.name}.json"
+    file = common.out_dir(args.results, "headline/arms") / f"{out.name}.json"
     kept = json.loads(file.read_text()) if file.exists() else {}
     commits = kept.get("commits", [])
     if not cache.has_finished(out) and code not in commits:
@@ -163,7 +163,7 @@ def rows_of(results: Path, seeds: int, first: int, steps: int) -> list[dict]:
     for env in ENVS:
         for arm in ARMS:
             out = run_dir(results, env, arm, seeds, first, steps)
-            file = results / "headline" / "runs" / f"{out.name}.json"
+            file = results / "headline" / "arms" / f"{out.name}.json"
             if not file.exists() or "gymnasium" not in (data := json.loads(file.read_text())):
                 continue
             history = cache.load_history(out)
