@@ -1,0 +1,218 @@
+"""Soft actor-critic (Haarnoja et al. 2018) as MBPO and SBX train it: a tanh-squashed Gaussian
+actor, twin critics with Polyak-averaged targets, and an entropy temperature tuned toward a
+target entropy. Its updates read batches of transitions from a replay memory, many per real
+step, all of them in one `lax.scan` (`SAC.learn`).
+
+The pure pieces (`squashed_sample`, `critic_loss`, `actor_loss`, `temperature_loss`,
+`polyak`) are tested against hand-computed values. Wiring the learner into the trainer's
+stages (a replay ring in the run's state, updates per real step) is the off-policy issue's
+next step; `SACConfig` becomes a config section then.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+import optax
+from flax import struct
+
+from ldn_jax.networks import MLP
+
+Array = jax.Array
+
+LOG_STD_BOUNDS = (-20.0, 2.0)
+"""The actor's log std is clipped into these (softlearning's, SBX's)."""
+
+
+@dataclass(frozen=True)
+class SACConfig:
+    """SAC's constants; the defaults are MBPO's and SBX's for MuJoCo."""
+
+    hidden: int = 256
+    """Units of each hidden layer of the actor and of each critic."""
+    layers: int = 2
+    """Hidden layers (ReLU)."""
+    lr: float = 3e-4
+    """Adam's learning rate of the actor, the critics and the temperature."""
+    gamma: float = 0.99
+    tau: float = 0.005
+    """Polyak step of the target critics after every critic update."""
+    batch_size: int = 256
+    target_entropy: float | None = None
+    """The entropy the temperature steers toward; None: minus the action dimension (MBPO's
+    configs use -3 on halfcheetah and -1 on hopper)."""
+    init_alpha: float = 1.0
+
+
+@struct.dataclass
+class Transitions:
+    """A batch of transitions, `[B, ...]`."""
+
+    obs: Array
+    action: Array
+    """In the policy's range, [-1, 1] per dimension."""
+    reward: Array
+    next_obs: Array
+    terminated: Array
+    """True where the episode ended by the task's own termination: no bootstrap. A time
+    limit or a stopped imagined rollout is not a termination."""
+
+
+@struct.dataclass
+class SACState:
+    params: dict
+    """`{"actor", "critic", "target", "log_alpha"}`; critic and target stack the twin
+    critics `[2, ...]`."""
+    opt_state: optax.OptState
+
+
+def squashed_sample(mean: Array, log_std: Array, key: Array) -> tuple[Array, Array]:
+    """a = tanh(u), u ~ N(mean, exp(log_std)^2) per dimension; returns `(a [..., A], log
+    pi(a) [...])`, the change of variables by the stable form of log(1 - tanh(u)^2) =
+    2 (log 2 - u - softplus(-2u))."""
+    u = mean + jnp.exp(log_std) * jax.random.normal(key, mean.shape)
+    gaussian = -0.5 * jnp.square((u - mean) / jnp.exp(log_std)) - log_std
+    gaussian = gaussian - 0.5 * jnp.log(2 * jnp.pi)
+    correction = 2.0 * (jnp.log(2.0) - u - jax.nn.softplus(-2.0 * u))
+    return jnp.tanh(u), (gaussian - correction).sum(axis=-1)
+
+
+def critic_loss(
+    q: Array, batch: Transitions, next_q: Array, next_log_prob: Array, alpha: Array, gamma: float
+) -> Array:
+    """1/2 of the twin critics' squared errors summed over critics, averaged over the batch:
+    target r + gamma (1 - terminated) (min_i Q_i'(s', a') - alpha log pi(a'|s')).
+    `q`: `[2, B]`; `next_q`: the target critics at (s', a'), `[2, B]`."""
+    soft = next_q.min(axis=0) - alpha * next_log_prob
+    target = batch.reward + gamma * (1.0 - batch.terminated) * soft
+    target = jax.lax.stop_gradient(target)
+    return 0.5 * jnp.square(q - target).mean(axis=-1).sum()
+
+
+def actor_loss(alpha: Array, log_prob: Array, q: Array) -> Array:
+    """mean(alpha log pi(a|s) - min_i Q_i(s, a)), `q` `[2, B]`, reparameterised in a."""
+    return (alpha * log_prob - q.min(axis=0)).mean()
+
+
+def temperature_loss(log_alpha: Array, log_prob: Array, target_entropy: float) -> Array:
+    """-mean(log alpha (log pi + target)): alpha grows while the policy's entropy (-log pi)
+    is below the target and shrinks above it."""
+    return -(log_alpha * jax.lax.stop_gradient(log_prob + target_entropy)).mean()
+
+
+def polyak(target, online, tau: float):
+    """target <- (1 - tau) target + tau online, leaf by leaf."""
+    return jax.tree.map(lambda t, o: (1.0 - tau) * t + tau * o, target, online)
+
+
+class _Actor(nn.Module):
+    config: SACConfig
+    actions: int
+
+    @nn.compact
+    def __call__(self, obs: Array) -> tuple[Array, Array]:
+        c = self.config
+        out = MLP(c.hidden, 2 * self.actions, "relu", 0.0, c.layers, "fan_in")(obs)
+        mean, log_std = out[..., : self.actions], out[..., self.actions :]
+        return mean, jnp.clip(log_std, *LOG_STD_BOUNDS)
+
+
+class _Critic(nn.Module):
+    config: SACConfig
+
+    @nn.compact
+    def __call__(self, obs: Array, action: Array) -> Array:
+        c = self.config
+        x = jnp.concatenate([obs, action], axis=-1)
+        return MLP(c.hidden, 1, "relu", 0.0, c.layers, "fan_in")(x)[..., 0]
+
+
+class SAC:
+    """SAC for `obs_size` observations and `actions` continuous actions in [-1, 1]."""
+
+    def __init__(self, config: SACConfig, obs_size: int, actions: int):
+        self.config = config
+        self.obs_size, self.actions = obs_size, actions
+        self.actor = _Actor(config, actions)
+        self.critic = _Critic(config)
+        target = config.target_entropy
+        self.target_entropy = float(-actions if target is None else target)
+        adam = optax.adam(config.lr)
+        labels = {"actor": "adam", "critic": "adam", "log_alpha": "adam", "target": "fixed"}
+        self.optimizer = optax.multi_transform({"adam": adam, "fixed": optax.set_to_zero()}, labels)
+
+    def init(self, key: Array) -> SACState:
+        k_actor, k_critic = jax.random.split(key)
+        obs, action = jnp.zeros((1, self.obs_size)), jnp.zeros((1, self.actions))
+        critics = jax.vmap(lambda k: self.critic.init(k, obs, action))(
+            jax.random.split(k_critic, 2)
+        )
+        params = {
+            "actor": self.actor.init(k_actor, obs),
+            "critic": critics,
+            "target": jax.tree.map(jnp.copy, critics),
+            "log_alpha": jnp.log(jnp.float32(self.config.init_alpha)),
+        }
+        return SACState(params, self.optimizer.init(params))
+
+    def q(self, critics: dict, obs: Array, action: Array) -> Array:
+        """Both critics' values, `[2, ...]`."""
+        return jax.vmap(self.critic.apply, (0, None, None))(critics, obs, action)
+
+    def act(self, params: dict, key: Array, obs: Array) -> Array:
+        """A sampled action in [-1, 1]."""
+        return squashed_sample(*self.actor.apply(params["actor"], obs), key)[0]
+
+    def greedy(self, params: dict, obs: Array) -> Array:
+        """tanh of the Gaussian's mean."""
+        return jnp.tanh(self.actor.apply(params["actor"], obs)[0])
+
+    def losses(self, params: dict, batch: Transitions, key: Array) -> tuple[Array, dict]:
+        """The three losses of one batch, summed for one gradient (each reads only its own
+        parameters: the others enter through `stop_gradient`)."""
+        k_next, k_now = jax.random.split(key)
+        c = self.config
+        alpha = jnp.exp(jax.lax.stop_gradient(params["log_alpha"]))
+        next_action, next_log_prob = squashed_sample(
+            *self.actor.apply(jax.lax.stop_gradient(params["actor"]), batch.next_obs), k_next
+        )
+        next_q = self.q(params["target"], batch.next_obs, next_action)
+        q = self.q(params["critic"], batch.obs, batch.action)
+        critic = critic_loss(q, batch, next_q, next_log_prob, alpha, c.gamma)
+        action, log_prob = squashed_sample(*self.actor.apply(params["actor"], batch.obs), k_now)
+        frozen = jax.lax.stop_gradient(params["critic"])
+        actor = actor_loss(alpha, log_prob, self.q(frozen, batch.obs, action))
+        temperature = temperature_loss(params["log_alpha"], log_prob, self.target_entropy)
+        metrics = {"critic_loss": critic, "actor_loss": actor, "alpha": alpha}
+        metrics["entropy"] = -jax.lax.stop_gradient(log_prob).mean()
+        return critic + actor + temperature, metrics
+
+    def update(self, state: SACState, batch: Transitions, key: Array) -> tuple[SACState, dict]:
+        """One gradient step of critics, actor and temperature, then the targets' Polyak step."""
+        grads, metrics = jax.grad(self.losses, has_aux=True)(state.params, batch, key)
+        updates, opt_state = self.optimizer.update(grads, state.opt_state, state.params)
+        params = optax.apply_updates(state.params, updates)
+        params["target"] = polyak(params["target"], params["critic"], self.config.tau)
+        return SACState(params, opt_state), metrics
+
+    def learn(
+        self,
+        state: SACState,
+        sample: Callable[[Array], Transitions],
+        key: Array,
+        updates: int,
+    ) -> tuple[SACState, dict]:
+        """`updates` gradient steps in one `lax.scan`, each on `sample(key)`: a batch drawn
+        on device (from the replay memory, or a mix of real and imagined rows); the
+        metrics averaged over the steps."""
+
+        def step(state, key):
+            k_sample, k_update = jax.random.split(key)
+            return self.update(state, sample(k_sample), k_update)
+
+        state, metrics = jax.lax.scan(step, state, jax.random.split(key, updates))
+        return state, jax.tree.map(jnp.mean, metrics)
