@@ -728,6 +728,13 @@ def test_table_4s_verdicts_read_the_p_holm_adjusted_over_the_six_tasks():
     alone = table4_section({"seeds": 5, "rows": rows[:2]}).findings[0]
     assert "Holm-adjusted over 1 tasks 0.016" in alone
     assert alone.endswith("REPRODUCED (MBRL-LDN higher, as in the paper).")
+    # Plain A3C of the same config beside it, where table4.py found the family study's run.
+    plain = {"seeds": 5, "rows": rows[:2], "plain_a3c": {"ant": [901, 911, 921, 931, 941]}}
+    beside = table4_section(plain).findings[0]
+    assert "Plain A3C (the family study's run of the same config) ends at 921.0" in beside
+    # U = 10 of 25 pairs (each A3C seed 1 above its MBRL-LDN twin): exact two-sided p 0.69
+    assert "Mann-Whitney p = 0.69 (descriptive, outside the corrected family)" in beside
+    assert "P(better) = 0.40" in beside
 
 
 def test_figure_9s_verdicts_read_the_p_holm_adjusted_over_the_figure():

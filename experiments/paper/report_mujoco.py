@@ -16,6 +16,7 @@ from experiments.paper.report_format import (
     holm,
     inconclusive,
     iqm,
+    mann_whitney,
     mann_whitney_p,
     pm,
     powered_verdict,
@@ -59,17 +60,19 @@ def table4_section(table: dict) -> Section:
         ]
         for r in done
     ]
-    findings = table4_findings(done)
+    findings = table4_findings(done, table.get("plain_a3c", {}))
     title = TITLES["table4"]
     return Section(title, [intro, Table(header, rows), *_pending_note(table)], findings)
 
 
-def table4_findings(rows: list[dict]) -> list[str]:
+def table4_findings(rows: list[dict], plain: dict[str, list[float]] | None = None) -> list[str]:
     """Per task, MBRL-LDN vs A3C-Model on the final moving return: the six tasks are one
     family, so each task's two-sided Mann-Whitney p is Holm-adjusted over the tasks that have
     a test, and the verdict reads the adjusted p: REPRODUCED only where it is below 0.05 and
     MBRL-LDN is higher; A3C-Model higher where it is below 0.05 the other way; otherwise no
-    significant difference (inconclusive: the budget below the paper's, or the seeds)."""
+    significant difference (inconclusive: the budget below the paper's, or the seeds). Where
+    `plain` holds plain A3C's final moving returns on a task (the family study's run of the
+    same config), the finding sets MBRL-LDN beside it too."""
     pairs = {
         env: (algos["ldn"], algos["a2c-model"])
         for env, algos in by_env(rows).items()
@@ -96,11 +99,19 @@ def table4_findings(rows: list[dict]) -> list[str]:
             verdict = "A3C-Model higher (the paper: MBRL-LDN higher): " + (
                 short or "NOT reproduced"
             )
+        a3c = ""
+        if (plain or {}).get(env):
+            a3c_mean = sum(plain[env]) / len(plain[env])
+            a3c = (
+                f" Plain A3C (the family study's run of the same config) ends at "
+                f"{a3c_mean:.1f}: MBRL-LDN against it {mann_whitney(x, plain[env])} "
+                f"(descriptive, outside the corrected family), {better(x, plain[env], False)}."
+            )
         findings.append(
             f"Table 4, {env} ({budget(ldn)}): MBRL-LDN {ldn['mean']:.1f} vs "
             f"A3C-Model {model['mean']:.1f} final moving return "
             f"({adjusted_text(raw[env], p, family)}, {better(x, y, False)}; paper "
-            f"{ldn['paper']} vs {model['paper']}): {verdict}."
+            f"{ldn['paper']} vs {model['paper']}): {verdict}.{a3c}"
         )
     return findings
 

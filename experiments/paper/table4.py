@@ -36,6 +36,27 @@ def rows(entries: list[dict]) -> list[dict]:
     return out
 
 
+def plain_a3c(results, entries: list[dict]) -> dict[str, list[float]]:
+    """Per task whose Table 4 runs are the family study's (the same configs: the tasks of a
+    1M-step default budget and the paper's step limit, `cache.run_dir`), plain A3C's final
+    moving returns from that study's finished run of the same config, or its record; trains
+    nothing."""
+    out = {}
+    for entry in entries:
+        if entry["algo"] != "ldn" or entry["status"] != "done":
+            continue
+        env, seeds = entry["env"], entry["config"].seeds
+        if entry["dir"] != cache.family_run_dir(results, env, "ldn", seeds):
+            continue
+        run = cache.family_run_dir(results, env, "a2c", seeds)
+        if cache.progress(common.family_config(env, "a2c", seeds), run)["state"] == "new":
+            continue
+        summary = cache.finished_summary(run)
+        if summary is not None:
+            out[env] = [r["final_moving_return"] for r in summary["runs"]]
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     scale, results = common.parse_args(argv, __doc__)
     entries = cache.collect_runs(ENVS, ALGOS, scale, results)
@@ -46,6 +67,7 @@ def main(argv: list[str] | None = None) -> int:
         "seeds": scale.mujoco_seeds,
         "metric": "final moving return",
         "rows": table,
+        "plain_a3c": plain_a3c(results, entries),
     }
     common.write_json(out / "table4.json", record)
     common.write_csv(
