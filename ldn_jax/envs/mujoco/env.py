@@ -10,7 +10,6 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from ldn_jax.envs.mujoco.model import ModelError
 from ldn_jax.envs.mujoco.tasks import TASKS, Physics, Task
 
 Array = jax.Array
@@ -195,20 +194,3 @@ def _nv(task: str) -> int:
 def _dt(task: str) -> float:
     """Seconds per env step, as gymnasium's `env.dt` (model timestep x frame skip)."""
     return float(_model(task).opt.timestep) * TASKS[task].frame_skip
-
-
-__all__ = [
-    "BACKENDS",
-    "BACKEND_CHOICES",
-    "TASKS",
-    "ContinuousActions",
-    "EnvParams",
-    "EnvState",
-    "ModelError",
-    "MujocoEnv",
-    "Physics",
-    "Task",
-    "control",
-    "engine",
-    "resolve_backend",
-]
