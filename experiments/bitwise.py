@@ -6,7 +6,8 @@ metrics (wall times aside) are hashed, so that two commits can be compared to th
 
 The runs cover each family and mode a refactor of the trainer touches: A2C, the LD draw at
 two K, PPO with imagination, a sweep, the native MuJoCo engine, a grid of runs, and the
-`branched` preset (halfcheetah's LD draw, hopper's critic-only rows, and the paper's M1-vs-M0 LD on a probabilistic ensemble).
+`branched` preset (halfcheetah's LD draw, hopper's critic-only rows, and the paper's
+M1-vs-M0 LD on a probabilistic ensemble).
 """
 
 from __future__ import annotations
