@@ -77,11 +77,11 @@ def _matmul_backward(residuals, grad: Array):
     """JAX's cotangents of `x @ kernel`, with the kernel's gradient `x^T grad` computed
     with the narrower of its two sides as the rows of the product.
 
-    The kernel's gradient contracts the batch's rows. XLA:CPU runs it 3-5 times slower when
-    the wide side leads (`[200, 2]` as `h^T g` rather than `(g^T h)^T`, `[200, 4]` rather
-    than `[4, 200]`, for 10 vmapped seeds of 160 rows), and left alone it picks either,
-    depending on the program around it; the barrier keeps it from folding the transpose
-    back in. The sums are the same, perhaps added in another order (tests/test_networks.py).
+    The kernel's gradient contracts the batch's rows. XLA:CPU runs it several times slower
+    when the wide side leads (`[200, 2]` as `h^T g` rather than `(g^T h)^T`; measured in
+    docs/logs/benchmarks.md, "The kernel gradient, narrow side first"), and left alone it
+    picks either, depending on the program around it; the barrier keeps it from folding the
+    transpose back in. The sums are the same, perhaps added in another order (tests/test_networks.py).
     Being a `custom_vjp`, the layer has no forward-mode derivative (`jax.jvp`).
     """
     x, kernel = residuals

@@ -243,8 +243,8 @@ class Trainer:
         key s at every point (common random numbers). In a sweep each point starts from
         its own values (an optimiser state may hold its learning rate).
 
-        Jitted, one program instead of some hundred eager ops (about 1.5 s per process on
-        CPU): the same values to the bit (`networks.normal_init`)."""
+        Jitted, one program instead of some hundred eager ops (seconds per process on CPU):
+        the same values to the bit (`networks.normal_init`)."""
         return jax.jit(self._init_batch)()
 
     def _init_batch(self) -> TrainState:

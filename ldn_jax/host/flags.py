@@ -305,7 +305,7 @@ def parser() -> Parser:
         action="store_true",
         default=None,
         help="metrics identical to the bit (CPU) whatever --devices, for runs that all use "
-        "--bitwise: no YNNPACK reduction fusions (about 8%% slower), and a device holding "
+        "--bitwise: no YNNPACK reduction fusions (slower: docs/scaling.md), and a device holding "
         "one seed computes it twice; a resumed run keeps what it was started with",
     )
     p.add_argument(
