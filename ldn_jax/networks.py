@@ -81,8 +81,9 @@ def _matmul_backward(residuals, grad: Array):
     when the wide side leads (`[200, 2]` as `h^T g` rather than `(g^T h)^T`; measured in
     docs/logs/benchmarks.md, "The kernel gradient, narrow side first"), and left alone it
     picks either, depending on the program around it; the barrier keeps it from folding the
-    transpose back in. The sums are the same, perhaps added in another order (tests/test_networks.py).
-    Being a `custom_vjp`, the layer has no forward-mode derivative (`jax.jvp`).
+    transpose back in. The sums are the same, perhaps added in another order
+    (tests/test_networks.py). Being a `custom_vjp`, the layer has no forward-mode derivative
+    (`jax.jvp`).
     """
     x, kernel = residuals
     inputs, features = kernel.shape
