@@ -9,6 +9,7 @@ fitted by `gaussian_nll`, and the members are ranked on held-out slots of the bu
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import jax
 import jax.numpy as jnp
@@ -88,6 +89,18 @@ def action_encoder(encoding: str, policy, action_spec) -> tuple:
     if encoding != "force" or not forces:
         raise ValueError(f"action encoding {encoding!r} is not available for this env")
     return lambda action: jnp.asarray(forces, jnp.float32)[action][..., None], 1
+
+
+@dataclass(frozen=True)
+class EarlyStop:
+    """When `Dynamics.fit_until_stalled` ends (MBPO's: patience 5, a 1% gain)."""
+
+    patience: int = 5
+    """Epochs in a row without a gain that the fit goes on through."""
+    min_gain: float = 0.01
+    """A member gains where its held-out error falls by more than this share of its best."""
+    max_epochs: int = 1000
+    """The fit ends here whatever the errors do."""
 
 
 class Dynamics:
@@ -336,6 +349,56 @@ class Dynamics:
             return self._rank(state.replace(params=params, opt_state=opt_state), buffer, key), loss
         error_scale = loss if self.config.updates else state.error_scale
         return state.replace(params=params, opt_state=opt_state, error_scale=error_scale), loss
+
+    def fit_until_stalled(
+        self, state: ModelState, buffer: Buffer, key: Array, stop: EarlyStop
+    ) -> tuple[ModelState, Array, Array]:
+        """MBPO's fit of a probabilistic ensemble: epochs of `config.updates` steps on the
+        training slots, each member scored after every epoch by its squared error on
+        `HOLDOUT_BATCH` held-out transitions drawn once per fit. A member's parameters are
+        kept as its best where its error falls by more than `stop.min_gain` of its best;
+        the fit ends once no member has for more than `stop.patience` epochs in a row (or
+        after `stop.max_epochs`), each member back at its best, the elites ranked on those
+        errors. Returns the state, the last epoch's mean loss and the epochs taken."""
+        if not self.probabilistic:
+            raise ValueError("fit_until_stalled fits a probabilistic ensemble")
+        if self.config.normalize:
+            state = state.replace(stats=self.buffer_stats(buffer))
+        if self.config.support is not None:
+            state = state.replace(bounds=self.buffer_bounds(buffer))
+        held = buffer_sample_split(buffer, jax.random.fold_in(key, 1), HOLDOUT_BATCH, True)
+        scores = lambda params: jax.vmap(self.squared_error, (0, None, None))(
+            params, held, state.stats
+        )
+        fit = jax.vmap(self._fit_one, (0, 0, None, None, 0))
+        members = self.config.ensemble
+
+        def epoch(carry):
+            count, stalled, params, opt_state, best, best_error, _, key = carry
+            key, k_fit = jax.random.split(key)
+            params, opt_state, losses = fit(
+                params, opt_state, state.stats, buffer, jax.random.split(k_fit, members)
+            )
+            error = scores(params)
+            gained = error < (1.0 - stop.min_gain) * best_error  # the first epoch: inf
+            keep = lambda new, old: jnp.where(
+                gained.reshape((members,) + (1,) * (new.ndim - 1)), new, old
+            )
+            best = jax.tree.map(keep, params, best)
+            best_error = jnp.where(gained, error, best_error)
+            stalled = jnp.where(gained.any(), 0, stalled + 1)
+            return count + 1, stalled, params, opt_state, best, best_error, losses.mean(), key
+
+        going = lambda carry: (carry[0] < stop.max_epochs) & (carry[1] <= stop.patience)
+        zero = jnp.zeros((), jnp.int32)
+        start = (zero, zero, state.params, state.opt_state, state.params)
+        start += (jnp.full((members,), jnp.inf), jnp.zeros(()), key)
+        count, _, _, opt_state, best, best_error, loss, _ = jax.lax.while_loop(going, epoch, start)
+        elites = jnp.argsort(best_error, stable=True)[: self.elite_count].astype(jnp.int32)
+        state = state.replace(
+            params=best, opt_state=opt_state, elites=elites, error_scale=best_error[elites].mean()
+        )
+        return state, loss, count
 
     def _rank(self, state: ModelState, buffer: Buffer, key: Array) -> ModelState:
         """A probabilistic ensemble's elites: the members with the lowest squared error on

@@ -556,3 +556,39 @@ def test_a_run_from_before_the_cut_field_reads_its_horizon_as_the_cut():
     initial = from_preset("paper", env="cartpole-v1", algo="ldn").to_dict()
     initial["model"].pop("cut")
     assert Config.from_dict(initial).model.cut == ModelConfig.cut
+
+
+def test_the_fit_until_stalled_stops_on_the_held_out_error_and_keeps_each_members_best():
+    """MBPO's fit (`Dynamics.fit_until_stalled`): epochs until no member's held-out error has
+    fallen by 1% for 5 epochs in a row, each member back at its best."""
+    from ldn_jax.dynamics import HOLDOUT_BATCH, EarlyStop
+
+    model = {**BRANCHED, "hidden": 32, "updates": 25, "lr": 3e-3, "normalize": True}
+    dynamics = Dynamics(ModelConfig(**model), 2, 1)
+    k = jax.random.split(jax.random.key(0), 3)
+    obs = jax.random.normal(k[0], (500, 2))
+    action = jax.random.uniform(k[1], (500, 1), minval=-1.0, maxval=1.0)
+    batch = Transitions(
+        obs=obs,
+        action=action,
+        next_obs=obs + 0.1 * action + 0.01 * jax.random.normal(k[2], (500, 2)),
+        reward=obs.sum(axis=1),
+    )
+    buffer = buffer_add(buffer_init(512, 2, 1), batch, jnp.ones(500, bool))
+    state = dynamics.init(jax.random.key(1))
+    fit = jax.jit(lambda s, key, stop: dynamics.fit_until_stalled(s, buffer, key, stop),
+                  static_argnums=2)  # fmt: skip
+    once, _, epochs = fit(state, jax.random.key(2), EarlyStop(max_epochs=1))
+    assert int(epochs) == 1
+    fitted, loss, epochs = fit(state, jax.random.key(2), EarlyStop(max_epochs=400))
+    # it stopped by itself, after at least the first epoch's gain and 6 without one
+    assert 7 <= int(epochs) < 400 and np.isfinite(float(loss))
+    # the elites' held-out error: lower than after one epoch, and what the state now scores
+    held = buffer_sample_split(
+        buffer, jax.random.fold_in(jax.random.key(2), 1), HOLDOUT_BATCH, True
+    )
+    errors = jax.vmap(dynamics.squared_error, (0, None, None))(fitted.params, held, fitted.stats)
+    elite = np.asarray(errors)[np.asarray(fitted.elites)]
+    assert float(fitted.error_scale) == pytest.approx(elite.mean(), rel=1e-5)
+    first = jax.vmap(dynamics.squared_error, (0, None, None))(once.params, held, once.stats)
+    assert elite.mean() < 0.5 * float(np.asarray(first).mean())
