@@ -332,10 +332,7 @@ class Dynamics:
         with `jax.random.split(key, E)[i]`; the loss returned, and kept as `error_scale`, is
         the members' mean.
         """
-        if self.config.normalize:
-            state = state.replace(stats=self.buffer_stats(buffer))
-        if self.config.support is not None:
-            state = state.replace(bounds=self.buffer_bounds(buffer))
+        state = self._refreshed(state, buffer)
         if not self.ensemble:
             params, opt_state, loss = self._fit_one(
                 state.params, state.opt_state, state.stats, buffer, key, value
@@ -350,6 +347,14 @@ class Dynamics:
         error_scale = loss if self.config.updates else state.error_scale
         return state.replace(params=params, opt_state=opt_state, error_scale=error_scale), loss
 
+    def _refreshed(self, state: ModelState, buffer: Buffer) -> ModelState:
+        """The normaliser and the support box from the buffer, where used, before a fit."""
+        if self.config.normalize:
+            state = state.replace(stats=self.buffer_stats(buffer))
+        if self.config.support is not None:
+            state = state.replace(bounds=self.buffer_bounds(buffer))
+        return state
+
     def fit_until_stalled(
         self, state: ModelState, buffer: Buffer, key: Array, stop: EarlyStop
     ) -> tuple[ModelState, Array, Array]:
@@ -362,10 +367,7 @@ class Dynamics:
         errors. Returns the state, the last epoch's mean loss and the epochs taken."""
         if not self.probabilistic:
             raise ValueError("fit_until_stalled fits a probabilistic ensemble")
-        if self.config.normalize:
-            state = state.replace(stats=self.buffer_stats(buffer))
-        if self.config.support is not None:
-            state = state.replace(bounds=self.buffer_bounds(buffer))
+        state = self._refreshed(state, buffer)
         held = buffer_sample_split(buffer, jax.random.fold_in(key, 1), HOLDOUT_BATCH, True)
         scores = lambda params: jax.vmap(self.squared_error, (0, None, None))(
             params, held, state.stats

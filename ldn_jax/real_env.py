@@ -76,7 +76,7 @@ class RealEnv:
     def evaluate(self, act: Callable[[Array], Array], key: Array, episodes: int) -> Array:
         """Mean return of the policy `act(obs [n, d]) -> actions` over `episodes` episodes."""
         n = episodes
-        obs, env_state = jax.vmap(self.env.reset, (0, None))(jax.random.split(key, n), self.params)
+        obs, env_state = self.reset(key, n)
 
         def body(carry, key):
             obs, env_state, alive, total = carry

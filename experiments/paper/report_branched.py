@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from experiments.paper.branched_rules import CAPS, RULES
+from experiments.paper.report_format import holm, mann_whitney_p
 from ldn_jax.host import stats
 
 
@@ -112,21 +113,23 @@ def section(rows: list[dict]) -> str:
 def _verdicts(mine: dict) -> list[str]:
     """Each rule against PPO: two-sided Mann-Whitney p, Holm-adjusted over the env's rules,
     and P(improvement); "beats PPO" or "worse than PPO" only where the adjusted p < 0.05."""
-    from scipy import stats as scipy_stats
-
     if "ppo" not in mine:
         return []
-    rules = [rule for rule in mine if rule != "ppo"]
-    ps = []
-    for rule in rules:
-        (x, _), (y, _) = _score(mine[rule]), _score(mine["ppo"])
-        ps.append(float(scipy_stats.mannwhitneyu(x, y).pvalue) if x != y else 1.0)
+    raw = {
+        rule: mann_whitney_p(_score(row)[0], _score(mine["ppo"])[0])
+        for rule, row in mine.items()
+        if rule != "ppo"
+    }
     out = []
-    for rule, p, adjusted in zip(rules, ps, stats.holm(ps), strict=True):
+    for rule, adjusted in holm(raw).items():
         chance = _improvement(mine[rule], mine["ppo"])["probability"]
+        if adjusted is None:
+            out.append(f"{RULES[rule][2]}: too few runs to test (P {chance:.2f})")
+            continue
         verdict = "no difference shown"
         if adjusted < 0.05:
             verdict = "beats PPO" if chance > 0.5 else "worse than PPO"
+        p = raw[rule]
         out.append(f"{RULES[rule][2]}: {verdict} (P {chance:.2f}, p {p:.2g}, Holm {adjusted:.2g})")
     return out
 
