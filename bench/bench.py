@@ -27,6 +27,7 @@ import jax.numpy as jnp
 
 from bench import stages
 from bench.mujoco_section import mujoco_section
+from bench.sac import sac_costs
 from bench.seeds import SEED_COUNTS, seed_counts, seed_scaling
 from bench.seeds import mjx_halfcheetah as seed_counts_mjx
 from bench.stages import ALGOS
@@ -43,6 +44,7 @@ SECTIONS = (
     "ceiling",
     "stages",
     "branched",
+    "sac",
     "sweep",
     "rejax",
     "compile",
@@ -344,6 +346,9 @@ def main() -> None:
     if "branched" in sections:
         size = dict(seeds=1, warm_iterations=2) if args.quick else {}
         result["branched_stages"] = stages.branched_stages(**size)
+    if "sac" in sections:
+        size = dict(seeds=1, steps=1000) if args.quick else {}
+        result["sac"] = sac_costs(**size)
     if "sweep" in sections:
         size = dict(seeds=2, episodes=40) if args.quick else {}
         result["sweep"] = sweep_vs_separate(**size)

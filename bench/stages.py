@@ -156,7 +156,7 @@ def ppo_update(seeds: int = 10, env_name: str = "cartpole-v1") -> dict:
     config = from_preset("paper", env=env_name, algo="ppo", seeds=seeds)
     cfg = config.agent
     env, params = envs.make(env_name)
-    ppo = PPO(cfg, env.observation_size(params), env.action_spec(params))
+    ppo = PPO(cfg, env.observation_size(params), env.action_spec(params), ppo=config.ppo)
     rows = cfg.n_steps * config.workers
     keys = jax.random.split(jax.random.key(0), 4)
     states = jax.vmap(ppo.init)(jax.random.split(keys[0], seeds))
@@ -176,9 +176,9 @@ def ppo_update(seeds: int = 10, env_name: str = "cartpole-v1") -> dict:
     learn = _best_seconds(learn, states, batch, shuffle, repeats=10)
     grad = jax.vmap(lambda s, b: jax.grad(ppo.loss, has_aux=True)(s.params, b)[0])
     grad = written_out(jax.jit(grad))
-    gradients = _best_seconds(grad, states, batch, repeats=10) * cfg.epochs
+    gradients = _best_seconds(grad, states, batch, repeats=10) * config.ppo.epochs
     return {
-        "what": f"PPO.learn on one rollout ({cfg.epochs} epochs x {cfg.minibatches} "
+        "what": f"PPO.learn on one rollout ({config.ppo.epochs} epochs x {config.ppo.minibatches} "
         f"minibatches of {rows} rows per seed), against its bare gradients",
         "seeds": seeds,
         "rows_per_seed": rows,
@@ -347,11 +347,9 @@ def branched_stages(
         "real_steps_per_iteration": real_steps,
         "imagined_steps_per_iteration": int(
             math.ceil(
-                config.model.imagined_ratio
-                * real_steps
-                / (config.model.branches * config.agent.n_steps)
+                config.imagine.ratio * real_steps / (config.imagine.branches * config.agent.n_steps)
             )
-            * config.model.branches
+            * config.imagine.branches
             * config.agent.n_steps
         ),
         "seconds_per_iteration": round(whole, 4),

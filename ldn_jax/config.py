@@ -26,10 +26,10 @@ INITS = tuple(networks.INITS)
 """Weight initialisers of actor and critic (`AgentConfig.init`)."""
 
 IMAGINE_MODES = ("episodes", "memory", "batch")
-"""How the imagined stage feeds the learner (`ModelConfig.imagine`)."""
+"""How the imagined stage feeds the learner (`ImagineConfig.mode`)."""
 
 IMAGINE_STARTS = ("initial", "real")
-"""Where imagined rollouts start (`ModelConfig.imagine_start`): a fresh initial state (the
+"""Where imagined rollouts start (`ImagineConfig.start`): a fresh initial state (the
 paper's), or a state of the real buffer (branched, ours in the style of MBPO)."""
 
 IMAGINED_STEPS = ("sample", "mean")
@@ -40,10 +40,10 @@ WORLDS = ("model", "true", "true-reward", "true-state")
 
 IMAGINED_STD = ("learn", "real")
 """What branched imagination's updates do to a state-independent log std
-(`ModelConfig.imagined_std`)."""
+(`ImagineConfig.std`)."""
 
 IMAGINED_UPDATES = ("all", "critic")
-"""What branched imagination's updates train (`ModelConfig.imagined_updates`)."""
+"""What branched imagination's updates train (`ImagineConfig.updates`)."""
 
 SCHEDULES = ("episodes", "steps")
 """What one iteration of real play is (`Config.schedule`)."""
@@ -52,7 +52,7 @@ LD_REDUCTIONS = ("mean", "sum")
 """How eq. 3's square is reduced over the model's outputs (`ModelConfig.ld_reduce`)."""
 
 STOP_RULES = ("ld", "m2ac", "macura", "horizon", "mbpo", "oracle", "none")
-"""What ends an imagined episode early (`ModelConfig.stop`; predicted termination and the
+"""What ends an imagined episode early (`StopConfig.rule`; predicted termination and the
 step limit always do): the learning-degree draw (MBRL-LDN), an M2AC-style rank mask on
 ensemble disagreement, a MACURA-style adaptive threshold on it, a fixed horizon (MBPO's
 rollout length), MBPO's horizon schedule, an oracle on the true one-step error, or nothing
@@ -75,7 +75,7 @@ class Algorithm:
     """What an algorithm name switches on. The algorithms share one code path."""
 
     learner: str
-    """Which learner trains the actor-critic: "a2c" (synchronous A3C) or "ppo"."""
+    """Which learner trains the actor-critic: "a2c" (synchronous A3C), "ppo" or "sac"."""
     uses_model: bool
     """Fit M1 on real transitions and train the agent on imagined episodes too."""
     ld_stop: bool
@@ -90,6 +90,7 @@ ALGORITHMS: dict[str, Algorithm] = {
     "ppo": Algorithm("ppo", uses_model=False, ld_stop=False),
     "ppo-model": Algorithm("ppo", uses_model=True, ld_stop=False),
     "ppo-ldn": Algorithm("ppo", uses_model=True, ld_stop=True),
+    "sac": Algorithm("sac", uses_model=False, ld_stop=False),
 }
 
 THRESHOLDS = {"cartpole-v0": 150.0, "cartpole-v1": 150.0, "cartpole-v2": 100.0}
@@ -98,7 +99,7 @@ THRESHOLDS = {"cartpole-v0": 150.0, "cartpole-v1": 150.0, "cartpole-v2": 100.0}
 
 @dataclass(frozen=True)
 class AgentConfig:
-    """The actor-critic and its learner."""
+    """The actor-critic and what its learners share."""
 
     gamma: float = 0.9
     """Discount factor."""
@@ -166,6 +167,12 @@ class AgentConfig:
     """The learner trains on the env's reward times this (after `terminal_reward`), so the
     critic's targets stay near 1 where returns run to thousands. Reported returns are the
     environment's own."""
+
+
+@dataclass(frozen=True)
+class PPOConfig:
+    """PPO's own constants (the `ppo` learner: ppo, ppo-model, ppo-ldn)."""
+
     gae_lambda: float = 0.95
     """PPO: lambda of generalised advantage estimation."""
     clip_eps: float = 0.2
@@ -189,8 +196,38 @@ class AgentConfig:
 
 
 @dataclass(frozen=True)
+class SACConfig:
+    """Soft actor-critic's own constants (the `sac` learner); the defaults are MBPO's and
+    SBX's for MuJoCo (docs/logs/mbpo-reference.md). Its discount is `agent.gamma`."""
+
+    hidden: int = 256
+    """Units of each hidden layer (ReLU) of the actor and of each of the twin critics."""
+    layers: int = 2
+    """Hidden layers of the actor and of each critic."""
+    lr: float = 3e-4
+    """Adam's learning rate of the actor, the critics and the temperature."""
+    tau: float = 0.005
+    """Polyak step of the target critics after every critic update."""
+    batch_size: int = 256
+    """Transitions in each update's batch, drawn uniformly from the replay memory."""
+    utd: int = 1
+    """Updates per real step (the update-to-data ratio): each segment of n steps x W
+    workers is followed by utd x n x W updates, all in one `lax.scan`."""
+    learning_starts: int = 1000
+    """Real transitions in the replay memory before the first update (per run)."""
+    buffer_capacity: int = 1_000_000
+    """Real transitions the replay memory keeps per run (a ring); a run allocates at most
+    its steps budget."""
+    target_entropy: float | None = None
+    """The entropy the temperature steers toward; None: minus the action dimension."""
+    init_alpha: float = 1.0
+    """The temperature at the start."""
+
+
+@dataclass(frozen=True)
 class ModelConfig:
-    """The dynamics model M1, its frozen twin M0, and how M1 is fitted."""
+    """The dynamics model M1, its frozen twin M0, how M1 is fitted and how its learning
+    degree is read."""
 
     ld: str = "m0"
     """Learning-degree estimator, one of `LD_ESTIMATORS`: "m0" compares M1 with M0 (eq. 3-6;
@@ -213,125 +250,11 @@ class ModelConfig:
     ld_scale: float = 1.0
     """The deviation is multiplied by this before K (eq. 6): a reading's scale, kept apart
     from K so that Figure 9's K in {0.5, 1, 2} keeps its meaning."""
-    stop: str | None = None
-    """What ends an imagined episode early, one of `STOP_RULES` (None: the algorithm's own,
-    "ld" for ldn and ppo-ldn, "none" for a2c-model and ppo-model; `Config.stop_rule`).
-    Every rule ends the episode after the step it judges, as a truncation (the critic
-    bootstraps from the predicted state), as Algorithm 1's LD draw does: rules differ only
-    in when they stop.
-    "ld": stop with probability 1 - LD (eq. 5), LD from `ld`'s estimator and K.
-    "m2ac": at each imagined step, of the rollouts still running only the `m2ac_keep` share
-    the ensemble is most confident about (lowest disagreement, nearest whole count) goes on,
-    in the style of M2AC (Pan et al. 2020); needs `ld` "ensemble".
-    "macura": stop where the ensemble's disagreement passes a threshold set afresh each
-    iteration, `macura_scale` times the `macura_quantile` quantile of the disagreement on
-    the first imagined step from the rollouts' start states, in the style of MACURA
-    (Frauenknecht et al. 2024); needs `ld` "ensemble".
-    "horizon": every imagined episode is cut after `horizon` steps (MBPO's rollout length).
-    "mbpo": the cut grows with the real steps taken, MBPO's schedule: `horizon_min` steps
-    until `horizon_from` real steps, `horizon_max` from `horizon_to`, linear between.
-    "oracle": stop where the true one-step error, ||M1(s, a) - env(s, a)|| on the next
-    observation with the real env stepped from the imagined state, exceeds `oracle_error`:
-    the ceiling of any estimator (envs whose observation is their state: CartPole,
-    inverted_pendulum, halfcheetah, hopper, walker2d).
-    "none": only predicted termination and the step limit (A3C-Model)."""
-    horizon: int = 5
-    """`stop` "horizon": imagined steps per episode from initial states (MBPO's h; h in
-    {1, 5, 25} is the study). Branches are cut by `cut`."""
-    m2ac_keep: float = 0.5
-    """`stop` "m2ac": the share of running imagined rollouts kept at each step."""
-    macura_quantile: float = 0.95
-    """`stop` "macura": the quantile of the first step's disagreement the threshold scales."""
-    macura_scale: float = 1.0
-    """`stop` "macura": the threshold is this times that quantile."""
-    horizon_min: int = 1
-    """`stop` "mbpo": the horizon until `horizon_from` real steps."""
-    horizon_max: int = 15
-    """`stop` "mbpo": the horizon from `horizon_to` real steps on."""
-    horizon_from: int = 20_000
-    """`stop` "mbpo": real steps (per run) where the horizon starts to grow."""
-    horizon_to: int = 100_000
-    """`stop` "mbpo": real steps where it reaches `horizon_max`."""
-    oracle_error: float = 0.01
-    """`stop` "oracle": the largest true one-step error (L2, the observation's units) that
-    does not stop; about 3 times the median one-step error of an ldn model on cartpole-v2
-    after 200 episodes (docs/defaults.md)."""
     action_encoding: str = "one-hot"
     """How the model takes a discrete action, one of `ACTION_ENCODINGS`: "one-hot" (ours,
     the default), "index" (the action's index as one number) or "force" (the force it
     applies, as one number: Table 1 gives CartPole's actions as forces). Continuous actions
     always go in as the clipped vector."""
-    imagine: str = "episodes"
-    """How imagined steps reach the learner, one of `IMAGINE_MODES`:
-    "episodes": each worker plays one imagined episode and the learner updates on every n
-    steps of it, as on real ones (Algorithm 1 read literally; workers whose episode the LD
-    stopped idle as weight-0 rows).
-    "memory" (PPO only): the same episodes, but their steps go to the imaginary memory I
-    (Algorithm 1, line 4: "train with batch data in I", line 26) as PPO rows, and PPO
-    learns from each full rollout's worth (n_steps x workers rows) once it exists. The LD
-    still sets how much is imagined; only the batch PPO learns from is whole.
-    "batch": a worker whose imagined episode ends starts the next from a fresh initial
-    state, until every worker has ended one and at least one segment is full: a fixed
-    quota of n_steps x workers imagined steps per iteration, whatever the LD.
-    The PPO family uses "memory" (`ldn_jax.presets.LEARNER`)."""
-
-    imagine_start: str = "initial"
-    """Where an imagined rollout starts, one of `IMAGINE_STARTS`.
-    "initial": a fresh initial state of the env (Algorithm 1, line 17; the paper's).
-    "real" (ours, branched in the style of MBPO): a state drawn uniformly from the real
-    buffer R. `branches` rollouts run side by side, each cut after `cut` steps (stop
-    "mbpo": its scheduled horizon) or sooner by `stop`, as a truncation, and followed at
-    once by another from a fresh draw, until the iteration has imagined `imagined_ratio`
-    steps per real step (whole segments). The learner updates on every n steps of the
-    `branches` rollouts, so every update is a full batch; `imagine` is not read."""
-    branches: int = 64
-    """`imagine_start` "real": the imagined rollouts played side by side."""
-    cut: int = 5
-    """`imagine_start` "real": a branch is cut after this many steps (stop "mbpo": after its
-    scheduled horizon instead), or sooner by `stop`."""
-    start_window: int = 0
-    """`imagine_start` "real": branches start from states of the newest `start_window` real
-    transitions in R; 0 draws from all of R (MBPO's way, for an off-policy learner). An
-    on-policy learner's updates are meant for the states its current policy visits, where
-    all of R holds every earlier policy's (on hopper at 200k steps, half of it from the
-    first 100k: mostly falls)."""
-    imagined_ratio: float = 4.0
-    """`imagine_start` "real": imagined steps per real step of the iteration (at least; in
-    whole segments of `branches` x n steps)."""
-    real_share: float = 0.0
-    """`imagine_start` "real": the share of real rows in each update on imagined ones, in
-    [0, 1): beside the `branches` imagined rollouts the learner gets the nearest whole
-    number of n-step windows of this iteration's real play (MBPO mixes in 5%)."""
-    imagined_std: str = "learn"
-    """`imagine_start` "real", for a policy with a state-independent log std
-    (`AgentConfig.log_std_init`), one of `IMAGINED_STD`. "learn": the updates on imagined
-    rows move the log std like every other parameter. "real": they leave it (and its
-    optimiser moments) as it was, so the policy's spread is set by the real updates alone;
-    imagined updates can otherwise shrink it far faster than real ones do (docs/training.md).
-    Two things still see the imagined updates: the step count of the actor's Adam, which
-    the log std shares (its bias correction fades a little sooner), and the actor's
-    gradient-norm clip, which includes the log std's gradient."""
-    imagined_updates: str = "all"
-    """`imagine_start` "real", one of `IMAGINED_UPDATES`: what the branched updates train.
-    "all": the whole learner. "critic" (ours, for studies; in the spirit of model-based value
-    expansion, Feinberg et al. 2018): the critic only; the actor's and log std's gradients
-    and steps are zero there (so a global-norm clip and PPO's KL guard see the critic alone),
-    and their optimiser moments stay as the real updates left them. The model's errors then
-    reach the policy only through the critic's values, not through advantages on imagined
-    rows. The `real_share` rows mixed into those updates train the critic only too."""
-    imagined_actor_step: float = 1.0
-    """`imagine_start` "real", in [0, 1] (ours, for studies): the size of the actor's and
-    log std's steps on imagined rows, as a share of their own (a learning rate that much
-    smaller there); 1 is the whole step. Between `imagined_updates` "critic" (no step) and
-    "all" (the whole step): the imagined advantages still move the policy, less far than
-    the real ones move it per update. Unlike "critic", the imagined gradients enter the
-    actor's optimiser moments, its global-norm clip and PPO's KL guard whole."""
-    imagined_epochs: int = 0
-    """`imagine_start` "real", for PPO: the epochs of each update on imagined rows; 0 takes
-    the learner's own (`AgentConfig.epochs`). Imagined rows are fresh every iteration, so
-    fewer passes over more of them is a trade the learner's epochs, chosen for scarce real
-    rows, do not make: at halfcheetah's 20 epochs, imagination and its updates are the
-    largest share of a branched run's time (docs/logs/imagination.md)."""
     probabilistic: bool = False
     """Each member of the ensemble (`ld` "ensemble" or "variance") outputs a Gaussian over
     the standardised next observation and reward, fitted by negative log-likelihood with
@@ -406,6 +329,131 @@ class ModelConfig:
 
 
 @dataclass(frozen=True)
+class StopConfig:
+    """What ends an imagined rollout early, and the parameters of each rule."""
+
+    rule: str | None = None
+    """What ends an imagined episode early, one of `STOP_RULES` (None: the algorithm's own,
+    "ld" for ldn and ppo-ldn, "none" for a2c-model and ppo-model; `Config.stop_rule`).
+    Every rule ends the episode after the step it judges, as a truncation (the critic
+    bootstraps from the predicted state), as Algorithm 1's LD draw does: rules differ only
+    in when they stop.
+    "ld": stop with probability 1 - LD (eq. 5), LD from `ld`'s estimator and K.
+    "m2ac": at each imagined step, of the rollouts still running only the `m2ac_keep` share
+    the ensemble is most confident about (lowest disagreement, nearest whole count) goes on,
+    in the style of M2AC (Pan et al. 2020); needs `ld` "ensemble".
+    "macura": stop where the ensemble's disagreement passes a threshold set afresh each
+    iteration, `macura_scale` times the `macura_quantile` quantile of the disagreement on
+    the first imagined step from the rollouts' start states, in the style of MACURA
+    (Frauenknecht et al. 2024); needs `ld` "ensemble".
+    "horizon": every imagined episode is cut after `horizon` steps (MBPO's rollout length).
+    "mbpo": the cut grows with the real steps taken, MBPO's schedule: `horizon_min` steps
+    until `horizon_from` real steps, `horizon_max` from `horizon_to`, linear between.
+    "oracle": stop where the true one-step error, ||M1(s, a) - env(s, a)|| on the next
+    observation with the real env stepped from the imagined state, exceeds `oracle_error`:
+    the ceiling of any estimator (envs whose observation is their state: CartPole,
+    inverted_pendulum, halfcheetah, hopper, walker2d).
+    "none": only predicted termination and the step limit (A3C-Model)."""
+    horizon: int = 5
+    """`stop` "horizon": imagined steps per episode from initial states (MBPO's h; h in
+    {1, 5, 25} is the study). Branches are cut by `cut`."""
+    m2ac_keep: float = 0.5
+    """`stop` "m2ac": the share of running imagined rollouts kept at each step."""
+    macura_quantile: float = 0.95
+    """`stop` "macura": the quantile of the first step's disagreement the threshold scales."""
+    macura_scale: float = 1.0
+    """`stop` "macura": the threshold is this times that quantile."""
+    horizon_min: int = 1
+    """`stop` "mbpo": the horizon until `horizon_from` real steps."""
+    horizon_max: int = 15
+    """`stop` "mbpo": the horizon from `horizon_to` real steps on."""
+    horizon_from: int = 20_000
+    """`stop` "mbpo": real steps (per run) where the horizon starts to grow."""
+    horizon_to: int = 100_000
+    """`stop` "mbpo": real steps where it reaches `horizon_max`."""
+    oracle_error: float = 0.01
+    """`stop` "oracle": the largest true one-step error (L2, the observation's units) that
+    does not stop; about 3 times the median one-step error of an ldn model on cartpole-v2
+    after 200 episodes (docs/defaults.md)."""
+
+
+@dataclass(frozen=True)
+class ImagineConfig:
+    """Where imagined rollouts start, how many there are, and what their updates move."""
+
+    mode: str = "episodes"
+    """How imagined steps reach the learner, one of `IMAGINE_MODES`:
+    "episodes": each worker plays one imagined episode and the learner updates on every n
+    steps of it, as on real ones (Algorithm 1 read literally; workers whose episode the LD
+    stopped idle as weight-0 rows).
+    "memory" (PPO only): the same episodes, but their steps go to the imaginary memory I
+    (Algorithm 1, line 4: "train with batch data in I", line 26) as PPO rows, and PPO
+    learns from each full rollout's worth (n_steps x workers rows) once it exists. The LD
+    still sets how much is imagined; only the batch PPO learns from is whole.
+    "batch": a worker whose imagined episode ends starts the next from a fresh initial
+    state, until every worker has ended one and at least one segment is full: a fixed
+    quota of n_steps x workers imagined steps per iteration, whatever the LD.
+    The PPO family uses "memory" (`ldn_jax.presets.LEARNER`)."""
+    start: str = "initial"
+    """Where an imagined rollout starts, one of `IMAGINE_STARTS`.
+    "initial": a fresh initial state of the env (Algorithm 1, line 17; the paper's).
+    "real" (ours, branched in the style of MBPO): a state drawn uniformly from the real
+    buffer R. `branches` rollouts run side by side, each cut after `cut` steps (stop
+    "mbpo": its scheduled horizon) or sooner by `stop`, as a truncation, and followed at
+    once by another from a fresh draw, until the iteration has imagined `ratio`
+    steps per real step (whole segments). The learner updates on every n steps of the
+    `branches` rollouts, so every update is a full batch; `imagine` is not read."""
+    branches: int = 64
+    """`start` "real": the imagined rollouts played side by side."""
+    cut: int = 5
+    """`start` "real": a branch is cut after this many steps (stop "mbpo": after its
+    scheduled horizon instead), or sooner by `stop`."""
+    start_window: int = 0
+    """`start` "real": branches start from states of the newest `start_window` real
+    transitions in R; 0 draws from all of R (MBPO's way, for an off-policy learner). An
+    on-policy learner's updates are meant for the states its current policy visits, where
+    all of R holds every earlier policy's (on hopper at 200k steps, half of it from the
+    first 100k: mostly falls)."""
+    ratio: float = 4.0
+    """`start` "real": imagined steps per real step of the iteration (at least; in
+    whole segments of `branches` x n steps)."""
+    real_share: float = 0.0
+    """`start` "real": the share of real rows in each update on imagined ones, in
+    [0, 1): beside the `branches` imagined rollouts the learner gets the nearest whole
+    number of n-step windows of this iteration's real play (MBPO mixes in 5%)."""
+    std: str = "learn"
+    """`start` "real", for a policy with a state-independent log std
+    (`AgentConfig.log_std_init`), one of `IMAGINED_STD`. "learn": the updates on imagined
+    rows move the log std like every other parameter. "real": they leave it (and its
+    optimiser moments) as it was, so the policy's spread is set by the real updates alone;
+    imagined updates can otherwise shrink it far faster than real ones do (docs/training.md).
+    Two things still see the imagined updates: the step count of the actor's Adam, which
+    the log std shares (its bias correction fades a little sooner), and the actor's
+    gradient-norm clip, which includes the log std's gradient."""
+    updates: str = "all"
+    """`start` "real", one of `IMAGINED_UPDATES`: what the branched updates train.
+    "all": the whole learner. "critic" (ours, for studies; in the spirit of model-based value
+    expansion, Feinberg et al. 2018): the critic only; the actor's and log std's gradients
+    and steps are zero there (so a global-norm clip and PPO's KL guard see the critic alone),
+    and their optimiser moments stay as the real updates left them. The model's errors then
+    reach the policy only through the critic's values, not through advantages on imagined
+    rows. The `real_share` rows mixed into those updates train the critic only too."""
+    actor_step: float = 1.0
+    """`start` "real", in [0, 1] (ours, for studies): the size of the actor's and
+    log std's steps on imagined rows, as a share of their own (a learning rate that much
+    smaller there); 1 is the whole step. Between `updates` "critic" (no step) and
+    "all" (the whole step): the imagined advantages still move the policy, less far than
+    the real ones move it per update. Unlike "critic", the imagined gradients enter the
+    actor's optimiser moments, its global-norm clip and PPO's KL guard whole."""
+    epochs: int = 0
+    """`start` "real", for PPO: the epochs of each update on imagined rows; 0 takes
+    the learner's own (`PPOConfig.epochs`). Imagined rows are fresh every iteration, so
+    fewer passes over more of them is a trade the learner's epochs, chosen for scarce real
+    rows, do not make: at halfcheetah's 20 epochs, imagination and its updates are the
+    largest share of a branched run's time (docs/logs/imagination.md)."""
+
+
+@dataclass(frozen=True)
 class Config:
     """One training run: an env, an algorithm, and every seed x K it runs in one program."""
 
@@ -443,7 +491,7 @@ class Config:
     live in the run's state), are counted as they complete (in the order (step, worker)),
     and no step is masked. M1 is fitted once per iteration, and each worker imagines one
     episode per real episode it ended in the iteration (Algorithm 1's one after each),
-    within `iteration_steps` imagined steps (`ModelConfig.imagine` "batch": its fixed
+    within `iteration_steps` imagined steps (`ImagineConfig.mode` "batch": its fixed
     quota instead).
     The `paper` preset keeps "episodes", the literal reading; `fast` uses "steps", which
     trains faster per run but takes more episodes to the threshold (docs/defaults.md)."""
@@ -483,7 +531,11 @@ class Config:
     of `SWEEPABLE`): every combination of the values, for every K, is one point of the
     vmapped program (`points`), so a sweep compiles once. Empty: no sweep."""
     agent: AgentConfig = field(default_factory=AgentConfig)
+    ppo: PPOConfig = field(default_factory=PPOConfig)
+    sac: SACConfig = field(default_factory=SACConfig)
     model: ModelConfig = field(default_factory=ModelConfig)
+    stop: StopConfig = field(default_factory=StopConfig)
+    imagine: ImagineConfig = field(default_factory=ImagineConfig)
 
     @classmethod
     def from_preset(cls, name: str, **overrides) -> Config:
@@ -511,12 +563,12 @@ class Config:
 
     @property
     def stop_rule(self) -> str | None:
-        """What ends this run's imagined episodes early (`ModelConfig.stop`, or the
+        """What ends this run's imagined episodes early (`StopConfig.rule`, or the
         algorithm's own); None for a model-free algorithm."""
         if self.algo not in ALGORITHMS or not ALGORITHMS[self.algo].uses_model:
             return None
-        if self.model.stop is not None:
-            return self.model.stop
+        if self.stop.rule is not None:
+            return self.stop.rule
         return "ld" if ALGORITHMS[self.algo].ld_stop else "none"
 
     @property
@@ -591,18 +643,25 @@ class Config:
         data.pop("run_format", None)  # the run directory's format version, not a setting
         if data.get("env") == "reacher" and "max_steps" not in data:
             data["max_steps"] = 1000  # a run from before reacher took gymnasium's 50 steps
-        agent = AgentConfig(**data.pop("agent", {}))
-        model = ModelConfig(**_branch_cut(data.pop("model", {})))
+        sections = {name: dict(data.pop(name, {})) for name in SECTIONS}
+        sections["model"] = _branch_cut(sections["model"])
+        for old, new in ALIASES.items():  # a config from before the split
+            (was, key), (now, new_key) = old.split("."), new.split(".")
+            if key in sections[was]:
+                sections[now][new_key] = sections[was].pop(key)
+        parts = {name: kind(**sections[name]) for name, kind in SECTIONS.items()}
         data["k"] = tuple(data.get("k", (1.0,)))
-        data["sweep"] = tuple((name, tuple(values)) for name, values in data.get("sweep", ()))
-        return cls(**data, agent=agent, model=model)
+        data["sweep"] = tuple(
+            (canonical(name), tuple(values)) for name, values in data.get("sweep", ())
+        )
+        return cls(**data, **parts)
 
 
 def _branch_cut(model: dict) -> dict:
     """A model section as this version reads it: a run from before `cut` was its own field
     cut its branches at `horizon`."""
     if model.get("imagine_start") == "real" and "cut" not in model:
-        model = {**model, "cut": model.get("horizon", ModelConfig.horizon)}
+        model = {**model, "cut": model.get("horizon", StopConfig.horizon)}
         model.pop("horizon", None)
     return model
 
@@ -610,8 +669,55 @@ def _branch_cut(model: dict) -> dict:
 from_preset = Config.from_preset
 """`Config.from_preset`, the name callers import."""
 
-SECTIONS = {"agent": AgentConfig, "model": ModelConfig}
-"""`Config`'s nested parts: their fields are named `agent.X` and `model.X`."""
+SECTIONS = {
+    "agent": AgentConfig,
+    "ppo": PPOConfig,
+    "sac": SACConfig,
+    "model": ModelConfig,
+    "stop": StopConfig,
+    "imagine": ImagineConfig,
+}
+"""`Config`'s nested parts: their fields are named `agent.X`, `ppo.X`, `model.X`, ..."""
+
+_MOVED_STOP = (
+    "horizon",
+    "m2ac_keep",
+    "macura_quantile",
+    "macura_scale",
+    "horizon_min",
+    "horizon_max",
+    "horizon_from",
+    "horizon_to",
+    "oracle_error",
+)
+_MOVED_IMAGINE = {
+    "imagine": "mode",
+    "imagine_start": "start",
+    "branches": "branches",
+    "cut": "cut",
+    "start_window": "start_window",
+    "imagined_ratio": "ratio",
+    "real_share": "real_share",
+    "imagined_std": "std",
+    "imagined_updates": "updates",
+    "imagined_actor_step": "actor_step",
+    "imagined_epochs": "epochs",
+}
+ALIASES: dict[str, str] = {
+    "model.stop": "stop.rule",
+    **{f"model.{name}": f"stop.{name}" for name in _MOVED_STOP},
+    **{f"model.{old}": f"imagine.{new}" for old, new in _MOVED_IMAGINE.items()},
+    **{f"agent.{name}": f"ppo.{name}" for name in (f.name for f in dataclasses.fields(PPOConfig))},
+}
+"""The dotted names of fields that moved when `ModelConfig` and `AgentConfig` were split
+(`model.imagine_start` is `imagine.start`): `--set`, `--config`, `--sweep`, `--explain`
+and a run directory's config.json from before still read them."""
+
+
+def canonical(name: str) -> str:
+    """A dotted field name as this version spells it (`ALIASES`)."""
+    return ALIASES.get(name, name)
+
 
 PRESETS = presets.PRESETS
 """The presets by name (`ldn_jax.presets`)."""
@@ -640,7 +746,7 @@ def resolution(preset: str, given: dict[str, tuple[object, str]]) -> list[Layer]
         merged |= values
     if "episodes" in given and "steps" not in given:
         found.append(("rule: a budget in episodes replaces the steps budget", {"steps": None}))
-    stop = merged["model.stop"] or ("ld" if algorithm.ld_stop else "none")
+    stop = merged["stop.rule"] or ("ld" if algorithm.ld_stop else "none")
     set_ld = any("model.ld" in values for _, values in found[1:])
     if stop in ENSEMBLE_RULES and not set_ld:
         found.append((f"rule: stop {stop} reads ensemble disagreement", {"model.ld": "ensemble"}))
@@ -668,7 +774,7 @@ def _flat(overrides: dict) -> dict[str, object]:
     flat = {}
     for name, value in overrides.items():
         if name in SECTIONS:
-            flat |= {f"{name}.{sub}": v for sub, v in dict(value).items()}
+            flat |= {canonical(f"{name}.{sub}"): v for sub, v in dict(value).items()}
         else:
             flat[name] = value
     return flat
@@ -698,12 +804,12 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "agent.init": INITS,
     "model.ld": LD_ESTIMATORS,
     "model.ld_reduce": LD_REDUCTIONS,
-    "model.stop": STOP_RULES,
+    "stop.rule": STOP_RULES,
     "model.action_encoding": ACTION_ENCODINGS,
-    "model.imagine": IMAGINE_MODES,
-    "model.imagine_start": IMAGINE_STARTS,
-    "model.imagined_std": IMAGINED_STD,
-    "model.imagined_updates": IMAGINED_UPDATES,
+    "imagine.mode": IMAGINE_MODES,
+    "imagine.start": IMAGINE_STARTS,
+    "imagine.std": IMAGINED_STD,
+    "imagine.updates": IMAGINED_UPDATES,
     "model.imagined_step": IMAGINED_STEPS,
     "model.world": WORLDS,
     "model.activation": ACTIVATIONS,
@@ -732,7 +838,7 @@ def sweepable() -> tuple[str, ...]:
     reads as a number. Not: K (`k` is its own axis), `threshold` (read by the host, after
     training), the initialisers' `init_std` and `log_std_init` (read where the parameters
     are made; `init_std` shapes the network modules), the branched imagination's
-    `imagined_ratio` and `real_share` (they size its batches), the model's `value_loss` (it
+    `ratio` and `real_share` (they size its batches), the model's `value_loss` (it
     decides whether the fit reads the critic), and every int, bool or str field
     (sizes, counts, choices: they change the program's shapes or code, so they need separate
     runs)."""
@@ -741,8 +847,8 @@ def sweepable() -> tuple[str, ...]:
         "agent.init_std",
         "model.init_std",
         "agent.log_std_init",
-        "model.imagined_ratio",
-        "model.real_share",
+        "imagine.ratio",
+        "imagine.real_share",
         "model.value_loss",
     }
     return tuple(
@@ -798,6 +904,7 @@ def validate(config: Config) -> Config:
     if config.algo not in ALGORITHMS:
         raise ValueError(f"unknown algo {config.algo!r}; valid algos: {', '.join(ALGORITHMS)}")
     checks = [
+        *_sac_checks(config),
         *_run_checks(config),
         *_agent_checks(config),
         *_model_checks(config),
@@ -880,7 +987,7 @@ def _run_checks(config: Config) -> list[tuple[bool, str]]:
 
 def _agent_checks(config: Config) -> list[tuple[bool, str]]:
     """The checks of `AgentConfig`: the learner's nets and constants."""
-    agent = config.agent
+    agent, ppo = config.agent, config.ppo
     return [
         (0 < config.agent.gamma <= 1, f"gamma must be in (0, 1], got {config.agent.gamma}"),
         (config.agent.n_steps >= 1, "n_steps must be >= 1"),
@@ -905,7 +1012,7 @@ def _agent_checks(config: Config) -> list[tuple[bool, str]]:
         ),
         (agent.rmsprop_eps > 0, f"rmsprop_eps must be > 0, got {agent.rmsprop_eps}"),
         (agent.adam_eps > 0, f"adam_eps must be > 0, got {agent.adam_eps}"),
-        (agent.value_coef >= 0, f"value_coef must be >= 0, got {agent.value_coef}"),
+        (ppo.value_coef >= 0, f"value_coef must be >= 0, got {ppo.value_coef}"),
         (
             config.agent.reward_scale > 0 and math.isfinite(config.agent.reward_scale),
             f"reward_scale must be > 0 and finite, got {config.agent.reward_scale}",
@@ -913,18 +1020,47 @@ def _agent_checks(config: Config) -> list[tuple[bool, str]]:
         (config.agent.actor_lr > 0 and config.agent.critic_lr > 0, "learning rates must be > 0"),
         (config.agent.activation in ACTIVATIONS, f"activation must be one of {ACTIVATIONS}"),
         (config.agent.init in INITS, f"init must be one of {', '.join(INITS)}"),
-        (0 <= config.agent.gae_lambda <= 1, "gae_lambda must be in [0, 1]"),
-        (config.agent.clip_eps > 0, "clip_eps must be > 0"),
+        (0 <= config.ppo.gae_lambda <= 1, "gae_lambda must be in [0, 1]"),
+        (config.ppo.clip_eps > 0, "clip_eps must be > 0"),
         (
-            config.agent.value_clip is None or config.agent.value_clip > 0,
+            config.ppo.value_clip is None or config.ppo.value_clip > 0,
             "value_clip must be > 0 (or None: no clip)",
         ),
-        (config.agent.epochs >= 1, "epochs must be >= 1"),
-        (config.agent.minibatches >= 1, "minibatches must be >= 1"),
-        (config.agent.max_grad_norm > 0, "max_grad_norm must be > 0"),
+        (config.ppo.epochs >= 1, "epochs must be >= 1"),
+        (config.ppo.minibatches >= 1, "minibatches must be >= 1"),
+        (config.ppo.max_grad_norm > 0, "max_grad_norm must be > 0"),
         (
-            config.agent.target_kl is None or config.agent.target_kl > 0,
-            f"target_kl must be > 0 (or None: no stop), got {config.agent.target_kl}",
+            config.ppo.target_kl is None or config.ppo.target_kl > 0,
+            f"target_kl must be > 0 (or None: no stop), got {config.ppo.target_kl}",
+        ),
+    ]
+
+
+def _sac_checks(config: Config) -> list[tuple[bool, str]]:
+    """The checks of `SACConfig`, and of what the `sac` learner needs of the run."""
+    sac, learner = config.sac, ALGORITHMS[config.algo].learner
+    return [
+        (sac.hidden >= 1 and sac.layers >= 1, "sac hidden and layers must be >= 1"),
+        (sac.lr > 0, f"sac lr must be > 0, got {sac.lr}"),
+        (0 < sac.tau <= 1, f"sac tau must be in (0, 1], got {sac.tau}"),
+        (sac.batch_size >= 1, f"sac batch_size must be >= 1, got {sac.batch_size}"),
+        (sac.utd >= 1, f"sac utd (updates per real step) must be >= 1, got {sac.utd}"),
+        (
+            sac.learning_starts >= 0,
+            f"sac learning_starts must be >= 0, got {sac.learning_starts}",
+        ),
+        (
+            sac.buffer_capacity >= 1,
+            f"sac buffer_capacity must be >= 1, got {sac.buffer_capacity}",
+        ),
+        (sac.init_alpha > 0, f"sac init_alpha must be > 0, got {sac.init_alpha}"),
+        (
+            learner != "sac" or _continuous(config.env),
+            f"sac is for continuous actions, and {config.env}'s are discrete; use a2c or ppo",
+        ),
+        (
+            learner != "sac" or config.schedule == "steps",
+            "sac plays real steps into its replay memory: it needs schedule 'steps'",
         ),
     ]
 
@@ -981,7 +1117,7 @@ def _model_checks(config: Config) -> list[tuple[bool, str]]:
 def _degree_checks(config: Config) -> list[tuple[bool, str]]:
     """The checks of the learning degree's reading, the stopping rules' parameters, pessimism
     and the support box."""
-    model = config.model
+    model, stop = config.model, config.stop
     return [
         (config.model.penalty >= 0, f"model penalty must be >= 0, got {config.model.penalty}"),
         (
@@ -1002,7 +1138,7 @@ def _degree_checks(config: Config) -> list[tuple[bool, str]]:
             config.model.ld in LD_ESTIMATORS,
             f"unknown ld {config.model.ld!r}; valid: {', '.join(LD_ESTIMATORS)}",
         ),
-        (model.horizon >= 1, f"horizon must be >= 1, got {model.horizon}"),
+        (stop.horizon >= 1, f"horizon must be >= 1, got {stop.horizon}"),
         (
             model.penalty == 0 or model.ld in ("ensemble", "variance"),
             "model penalty reads an ensemble's uncertainty (M1's deviation from M0 grows with "
@@ -1015,121 +1151,121 @@ def _degree_checks(config: Config) -> list[tuple[bool, str]]:
             "takes the real env's; use world 'model'",
         ),
         (
-            1 <= model.horizon_min <= model.horizon_max,
+            1 <= stop.horizon_min <= stop.horizon_max,
             f"the horizon schedule needs 1 <= horizon_min <= horizon_max, got "
-            f"{model.horizon_min} and {model.horizon_max}",
+            f"{stop.horizon_min} and {stop.horizon_max}",
         ),
         (
-            0 <= model.horizon_from <= model.horizon_to,
+            0 <= stop.horizon_from <= stop.horizon_to,
             f"the horizon schedule needs 0 <= horizon_from <= horizon_to, got "
-            f"{model.horizon_from} and {model.horizon_to}",
+            f"{stop.horizon_from} and {stop.horizon_to}",
         ),
         (
-            0 < model.macura_quantile <= 1,
-            f"macura_quantile must be in (0, 1], got {model.macura_quantile}",
+            0 < stop.macura_quantile <= 1,
+            f"macura_quantile must be in (0, 1], got {stop.macura_quantile}",
         ),
-        (model.macura_scale > 0, f"macura_scale must be > 0, got {model.macura_scale}"),
+        (stop.macura_scale > 0, f"macura_scale must be > 0, got {stop.macura_scale}"),
         (
             model.ld != "variance" or model.probabilistic,
             "ld 'variance' reads the members' predicted variance: it needs model.probabilistic",
         ),
-        (0 < model.m2ac_keep <= 1, f"m2ac_keep must be in (0, 1], got {model.m2ac_keep}"),
-        (model.oracle_error > 0, f"oracle_error must be > 0, got {model.oracle_error}"),
+        (0 < stop.m2ac_keep <= 1, f"m2ac_keep must be in (0, 1], got {stop.m2ac_keep}"),
+        (stop.oracle_error > 0, f"oracle_error must be > 0, got {stop.oracle_error}"),
     ]
 
 
 def _branch_checks(config: Config) -> list[tuple[bool, str]]:
     """The checks of where imagination starts and how much of it there is (branches)."""
-    model = config.model
+    imagine = config.imagine
     return [
-        (model.cut >= 1, f"cut must be >= 1, got {model.cut}"),
+        (imagine.cut >= 1, f"cut must be >= 1, got {imagine.cut}"),
         (
-            model.imagine_start in IMAGINE_STARTS,
-            f"unknown imagine_start {model.imagine_start!r}; valid: {', '.join(IMAGINE_STARTS)}",
+            imagine.start in IMAGINE_STARTS,
+            f"unknown imagine.start {imagine.start!r}; valid: {', '.join(IMAGINE_STARTS)}",
         ),
-        (model.branches >= 1, f"branches must be >= 1, got {model.branches}"),
-        (model.start_window >= 0, f"start_window must be >= 0, got {model.start_window}"),
+        (imagine.branches >= 1, f"branches must be >= 1, got {imagine.branches}"),
+        (imagine.start_window >= 0, f"start_window must be >= 0, got {imagine.start_window}"),
         (
-            model.start_window == 0 or model.imagine_start == "real",
-            "start_window picks where branches start: it needs imagine_start 'real'",
+            imagine.start_window == 0 or imagine.start == "real",
+            "imagine.start_window picks where branches start: it needs imagine.start 'real'",
         ),
         (
-            model.imagine_start == "initial"
+            imagine.start == "initial"
             or config.algo not in ALGORITHMS
             or config.algorithm.uses_model,
-            f"imagine_start 'real' branches imagined rollouts, and {config.algo} imagines "
+            f"imagine.start 'real' branches imagined rollouts, and {config.algo} imagines "
             "none; use a model-based algorithm (-model or -ldn)",
         ),
-        (model.imagined_ratio > 0, f"imagined_ratio must be > 0, got {model.imagined_ratio}"),
-        (0 <= model.real_share < 1, f"real_share must be in [0, 1), got {model.real_share}"),
+        (imagine.ratio > 0, f"imagine.ratio must be > 0, got {imagine.ratio}"),
+        (0 <= imagine.real_share < 1, f"real_share must be in [0, 1), got {imagine.real_share}"),
         (
-            config.model.imagine in IMAGINE_MODES,
-            f"unknown imagine {config.model.imagine!r}; valid: {', '.join(IMAGINE_MODES)}",
+            config.imagine.mode in IMAGINE_MODES,
+            f"unknown imagine {config.imagine.mode!r}; valid: {', '.join(IMAGINE_MODES)}",
         ),
         (
-            config.model.imagine != "memory" or config.algorithm.learner == "ppo",
-            "imagine 'memory' needs the PPO learner (A2C learns on every n steps as it plays)",
+            config.imagine.mode != "memory" or config.algorithm.learner == "ppo",
+            "imagine.mode 'memory' needs the PPO learner (A2C learns on every n steps as it plays)",
         ),
     ]
 
 
 def _imagined_update_checks(config: Config) -> list[tuple[bool, str]]:
     """The checks of what updates on branched imagination's rows may move."""
-    model = config.model
+    imagine = config.imagine
     return [
         (
-            model.imagined_std in IMAGINED_STD,
-            f"unknown imagined_std {model.imagined_std!r}; valid: {', '.join(IMAGINED_STD)}",
+            imagine.std in IMAGINED_STD,
+            f"unknown imagine.std {imagine.std!r}; valid: {', '.join(IMAGINED_STD)}",
         ),
         (
-            model.imagined_std == "learn"
-            or (model.imagine_start == "real" and config.agent.log_std_init is not None),
-            "imagined_std 'real' needs branched imagination (imagine_start 'real') and a "
+            imagine.std == "learn"
+            or (imagine.start == "real" and config.agent.log_std_init is not None),
+            "imagine.std 'real' needs branched imagination (imagine.start 'real') and a "
             "policy with a state-independent log std (agent.log_std_init)",
         ),
         (
-            model.imagined_updates in IMAGINED_UPDATES,
-            f"unknown imagined_updates {model.imagined_updates!r}; valid: "
-            f"{', '.join(IMAGINED_UPDATES)}",
+            imagine.updates in IMAGINED_UPDATES,
+            f"unknown imagine.updates {imagine.updates!r}; valid: {', '.join(IMAGINED_UPDATES)}",
         ),
         (
-            model.imagined_updates == "all" or model.imagine_start == "real",
-            "imagined_updates 'critic' needs branched imagination (imagine_start 'real')",
+            imagine.updates == "all" or imagine.start == "real",
+            "imagine.updates 'critic' needs branched imagination (imagine.start 'real')",
         ),
         (
-            0 <= model.imagined_actor_step <= 1,
-            f"imagined_actor_step must be in [0, 1], got {model.imagined_actor_step}",
+            0 <= imagine.actor_step <= 1,
+            f"imagine.actor_step must be in [0, 1], got {imagine.actor_step}",
         ),
         (
-            model.imagined_actor_step == 1
-            or (model.imagine_start == "real" and model.imagined_updates == "all"),
-            "imagined_actor_step scales the actor's steps on branched imagination's rows: it "
-            "needs imagine_start 'real' and imagined_updates 'all'",
+            imagine.actor_step == 1 or (imagine.start == "real" and imagine.updates == "all"),
+            "imagine.actor_step scales the actor's steps on branched imagination's rows: it "
+            "needs imagine.start 'real' and imagine.updates 'all'",
         ),
-        (model.imagined_epochs >= 0, f"imagined_epochs must be >= 0, got {model.imagined_epochs}"),
+        (imagine.epochs >= 0, f"imagine.epochs must be >= 0, got {imagine.epochs}"),
         (
-            model.imagined_epochs == 0 or model.imagine_start == "real",
-            "imagined_epochs sets the epochs on branched imagination's rows: it needs "
-            "imagine_start 'real'",
+            imagine.epochs == 0 or imagine.start == "real",
+            "imagine.epochs sets the epochs on branched imagination's rows: it needs "
+            "imagine.start 'real'",
         ),
         (
-            model.imagined_epochs == 0 or config.algorithm.learner == "ppo",
-            f"imagined_epochs sets PPO's epochs; {config.algo} is of the A2C family, which "
+            imagine.epochs == 0 or config.algorithm.learner == "ppo",
+            f"imagine.epochs sets PPO's epochs; {config.algo} is of the A2C family, which "
             "makes one update per segment",
         ),
     ]
 
 
 def _stop_checks(config: Config) -> list[tuple[bool, str]]:
-    """The checks of `ModelConfig.stop` and its parameters."""
-    stop, model = config.model.stop, config.model
+    """The checks of `StopConfig.rule` and its parameters."""
+    stop, model, imagine = config.stop.rule, config.model, config.imagine
     if stop is None:
         return []
     if stop not in STOP_RULES:
         return [(False, f"unknown stop {stop!r}; valid: {', '.join(STOP_RULES)}")]
     algorithm = ALGORITHMS.get(config.algo)
     learner = algorithm.learner if algorithm else "a2c"
-    model_based = {"a2c": "a2c-model or ldn", "ppo": "ppo-model or ppo-ldn"}[learner]
+    model_based = {"a2c": "a2c-model or ldn", "ppo": "ppo-model or ppo-ldn"}.get(
+        learner, "a model-based algorithm"
+    )
     return [
         (
             algorithm is None or algorithm.uses_model,
@@ -1151,14 +1287,14 @@ def _stop_checks(config: Config) -> list[tuple[bool, str]]:
             "'ensemble' (its default)",
         ),
         (
-            stop != "horizon" or model.imagine_start != "real",
+            stop != "horizon" or imagine.start != "real",
             "stop 'horizon' cuts imagined episodes from initial states; a branch's cut is "
-            "--cut (model.cut)",
+            "--cut (imagine.cut)",
         ),
         (
-            stop != "macura" or model.imagine_start == "real",
+            stop != "macura" or imagine.start == "real",
             "stop 'macura' sets its threshold from the branches' start states: it needs "
-            "imagine_start 'real' (the branched preset: --preset branched)",
+            "imagine.start 'real' (the branched preset: --preset branched)",
         ),
         (
             stop != "oracle" or _observes_state(config.env),

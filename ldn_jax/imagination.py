@@ -1,7 +1,7 @@
 """Imagined episodes: the agent acts in M1, and a stopping rule decides when to stop.
 
 Predicted termination (the env's own termination test on M1's predicted observation) ends
-an imagined episode as terminal: no bootstrap. A stopping rule (`ModelConfig.stop`: the
+an imagined episode as terminal: no bootstrap. A stopping rule (`StopConfig.rule`: the
 learning-degree draw of MBRL-LDN, an M2AC-style mask, an oracle; `STOP_RULES`) ends it as a
 truncation: the critic bootstraps, since the episode itself had not ended. A fixed horizon
 is the episode's step limit (`imagined_steps_limit`).
@@ -22,7 +22,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from ldn_jax.config import LD_ESTIMATORS, STOP_RULES, ModelConfig
+from ldn_jax.config import LD_ESTIMATORS, STOP_RULES, StopConfig
 from ldn_jax.dynamics import Dynamics, ModelState
 from ldn_jax.learning_degree import (
     REDUCE,
@@ -154,7 +154,7 @@ StopRule = Callable[[Array, StepView], Array]
 
 
 def stop_rule(
-    config: ModelConfig,
+    config: StopConfig,
     name: str,
     true_next: Callable | None = None,
     threshold: Array | None = None,
@@ -215,7 +215,7 @@ def first_step_statistic(
     return dynamics.config.ld_scale * statistic
 
 
-def scheduled_horizon(config: ModelConfig, env_steps: Array) -> Array:
+def scheduled_horizon(config: StopConfig, env_steps: Array) -> Array:
     """MBPO's rollout length after `env_steps` real steps: `horizon_min` until
     `horizon_from`, `horizon_max` from `horizon_to`, linear between, rounded down; int32."""
     span = max(config.horizon_to - config.horizon_from, 1)
@@ -230,7 +230,7 @@ def oracle_error(predicted: Array, truth: Array) -> Array:
     return jnp.linalg.norm(predicted - truth, axis=-1)
 
 
-def imagined_steps_limit(config: ModelConfig, name: str, max_steps: int) -> int:
+def imagined_steps_limit(config: StopConfig, name: str, max_steps: int) -> int:
     """The step limit of an imagined episode: the env's, or under "horizon" at most
     `config.horizon`."""
     return min(max_steps, config.horizon) if name == "horizon" else max_steps

@@ -21,6 +21,9 @@ with the measurements that chose it, is in the docs (`docs/defaults.md`).
 
 from __future__ import annotations
 
+MODEL_SECTIONS = ("model.", "stop.", "imagine.")
+"""The sections of imagination's settings: a preset's apply to model-based algorithms only."""
+
 Layer = tuple[str, dict[str, object]]
 """A layer's name and the fields it sets, by dotted name (`agent.actor_lr`)."""
 
@@ -30,13 +33,22 @@ LEARNER: dict[str, dict[str, object]] = {
     "ppo": {
         "agent.gamma": 0.99,
         "agent.n_steps": 100,
-        "agent.epochs": 5,
-        "agent.minibatches": 5,
+        "ppo.epochs": 5,
+        "ppo.minibatches": 5,
         "agent.entropy_beta": 0.01,
         "agent.actor_lr": 7.5e-4,
         "agent.critic_lr": 7.5e-4,
         # PPO learns from full batches of imagined rows, not from LD-stopped scraps.
-        "model.imagine": "memory",
+        "imagine.mode": "memory",
+    },
+    # SAC as SB3, SBX and MBPO run it: one env, an update after every real step, gamma 0.99;
+    # an iteration is 1,000 real steps (a MuJoCo episode's worth) between the host's logs.
+    "sac": {
+        "agent.gamma": 0.99,
+        "agent.n_steps": 1,
+        "workers": 1,
+        "schedule": "steps",
+        "iteration_steps": 1000,
     },
 }
 
@@ -54,10 +66,11 @@ CONTINUOUS: dict[str, dict[str, object]] = {
         "agent.entropy_beta": 0.0,
         "agent.actor_lr": 3e-4,
         "agent.critic_lr": 3e-4,
-        "agent.value_clip": None,
-        "agent.epochs": 10,
-        "agent.minibatches": 10,
+        "ppo.value_clip": None,
+        "ppo.epochs": 10,
+        "ppo.minibatches": 10,
     },
+    "sac": {},
     # The model for 11- to 27-dimensional observations: standardised deltas, ReLU, the box.
     "model": {
         "model.normalize": True,
@@ -86,16 +99,16 @@ _ZOO_HALFCHEETAH_PPO = {
     "agent.init": "fan_in",
     "agent.log_std_init": -2.0,
     "agent.gamma": 0.98,
-    "agent.gae_lambda": 0.92,
-    "agent.clip_eps": 0.1,
-    "agent.epochs": 20,
-    "agent.minibatches": 8,
+    "ppo.gae_lambda": 0.92,
+    "ppo.clip_eps": 0.1,
+    "ppo.epochs": 20,
+    "ppo.minibatches": 8,
     "agent.n_steps": 64,
     "agent.actor_lr": 2.0633e-5,
     "agent.critic_lr": 2.0633e-5,
     "agent.entropy_beta": 0.000401762,
-    "agent.value_coef": 0.58096,
-    "agent.max_grad_norm": 0.8,
+    "ppo.value_coef": 0.58096,
+    "ppo.max_grad_norm": 0.8,
 }
 
 # PPO's MuJoCo constants of OpenAI Baselines and CleanRL in our options: rollouts of 8 workers
@@ -106,7 +119,7 @@ _MUJOCO_PPO = {
     "schedule": "steps",
     "iteration_steps": 256,
     "agent.n_steps": 256,
-    "agent.minibatches": 32,
+    "ppo.minibatches": 32,
     "agent.hidden_layers": 2,
     "agent.actor_hidden": 64,
     "agent.critic_hidden": 64,
@@ -116,7 +129,7 @@ _MUJOCO_PPO = {
     "agent.squash_mean": False,
     "agent.normalize_obs": True,
     "agent.normalize_reward": True,
-    "agent.value_clip": 0.2,
+    "ppo.value_clip": 0.2,
 }
 _HOPPING = {**_LOCOMOTION, "ppo": _MUJOCO_PPO}
 
@@ -182,7 +195,7 @@ PRESETS["branched"] = {
     # "Branched imagination"; the measurements that chose it: docs/logs/imagination.md).
     "schedule": "steps",
     "k": (1.0,),
-    "model.imagine_start": "real",
+    "imagine.start": "real",
     "model.ld": "ensemble",
     "model.probabilistic": True,
     "model.ensemble": 5,
@@ -193,25 +206,25 @@ PRESETS["branched"] = {
     "model.batch_size": 256,
     "model.updates": 50,
     "model.buffer_capacity": 200_000,
-    "model.branches": 32,
-    "model.imagined_ratio": 4.0,
-    "model.real_share": 0.05,
-    "model.cut": 5,
+    "imagine.branches": 32,
+    "imagine.ratio": 4.0,
+    "imagine.real_share": 0.05,
+    "imagine.cut": 5,
     "envs": {
         # A model fit and an imagined batch every 8 workers x 100 real steps (halfcheetah's
         # PPO: x 128, two of its 64-step rollouts).
         # The pendulum's cut: 15 steps (docs/logs/imagination.md).
-        "inverted_pendulum": {"iteration_steps": 100, "model.cut": 15},
+        "inverted_pendulum": {"iteration_steps": 100, "imagine.cut": 15},
         # halfcheetah's cut (ppo-ldn's cap): 15 (the measurements: docs/defaults.md, "The
         # branched preset").
         "halfcheetah": {
             "iteration_steps": 100,
-            "model.cut": 15,
+            "imagine.cut": 15,
             "learners": {"ppo": {"iteration_steps": 128}},
         },
         # hopper's imagined rows train the critic only (docs/defaults.md, "The branched
         # preset").
-        "hopper": {**_ONE_MUJOCO_ROLLOUT, "model.imagined_updates": "critic"},
+        "hopper": {**_ONE_MUJOCO_ROLLOUT, "imagine.updates": "critic"},
         "walker2d": _ONE_MUJOCO_ROLLOUT,
         "ant": _ONE_MUJOCO_ROLLOUT,
         "ant-nocfrc": _ONE_MUJOCO_ROLLOUT,
@@ -257,7 +270,7 @@ def layers(
     ]
     if not model_based:
         model_free = lambda layer, name: (
-            not (layer.startswith("preset") and name.startswith("model."))
+            not (layer.startswith("preset") and name.startswith(MODEL_SECTIONS))
         )
         found = [
             (layer, {n: v for n, v in vals.items() if model_free(layer, n)})

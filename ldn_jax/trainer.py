@@ -7,7 +7,7 @@ when the trainer was built:
    episodes carrying over between iterations);
 2. the model's fit: M1 takes `model.updates` minibatch steps on the real buffer;
 3. imagination: each worker plays one episode in M1 from a fresh initial state; or, with
-   `model.imagine_start = "real"` (ours), many short branches in M1 from states of the real
+   `imagine.start = "real"` (ours), many short branches in M1 from states of the real
    buffer, the learner updating on full batches of them.
 `a2c` runs stage 1 only; `a2c-model` runs all three without the LD stop; `ldn` with it.
 The PPO family (`ppo`, `ppo-model`, `ppo-ldn`) is the same with PPO as the learner. The
@@ -79,7 +79,7 @@ class Trainer:
             buffer = buffer_init(
                 config.model.buffer_capacity, self.obs_size, self.model_action_size
             )
-            if config.model.imagine == "memory" and config.model.imagine_start != "real":
+            if config.imagine.mode == "memory" and config.imagine.start != "real":
                 memory = self.learner.memory_init(config.workers)
         workers = None
         if config.schedule == "steps":  # a key of its own: the other draws stay as they are

@@ -1,4 +1,4 @@
-"""Branched imagination (`model.imagine_start = "real"`), the probabilistic ensemble and the two
+"""Branched imagination (`imagine.start = "real"`), the probabilistic ensemble and the two
 rules the field uses (MBPO's horizon schedule, MACURA's adaptive cut): hand-made numbers and
 buffers, one short run, and the config's refusals."""
 
@@ -18,7 +18,7 @@ from ldn_jax.buffer import (
     buffer_sample_recent,
     buffer_sample_split,
 )
-from ldn_jax.config import ModelConfig, from_preset, validate
+from ldn_jax.config import ImagineConfig, ModelConfig, StopConfig, from_preset, validate
 from ldn_jax.dynamics import Dynamics, gaussian_nll
 from ldn_jax.host import flags
 from ldn_jax.host.settings import UsageError
@@ -27,38 +27,37 @@ from ldn_jax.imagination import StepView, macura_threshold, scheduled_horizon, s
 from ldn_jax.trainer import Trainer
 
 BRANCHED = {
-    "imagine_start": "real",
     "ld": "ensemble",
     "probabilistic": True,
     "ensemble": 3,
     "elites": 2,
     "hidden": 16,
     "hidden_layers": 2,
-    "branches": 6,
-    "imagined_ratio": 2.0,
-    "cut": 4,
     "updates": 5,
 }
-"""A small branched config for CartPole (probabilistic ensemble of 3, 2 elites)."""
+"""A small probabilistic ensemble for CartPole (3 members, 2 elites)."""
+
+BRANCHES = {"start": "real", "branches": 6, "ratio": 2.0, "cut": 4}
+"""Its branches: 6 side by side, cut after 4 steps, 2 imagined steps per real one."""
 
 
 def _config(**overrides):
     model = {**BRANCHED, **overrides.pop("model", {})}
+    imagine = {**BRANCHES, **overrides.pop("imagine", {})}
     base = dict(env="cartpole-v1", algo="ldn", seeds=2, k=(1.0,), episodes=16, workers=4)
-    return validate(
-        from_preset("paper", **{**base, "chunk_iterations": 2, "model": model, **overrides})
-    )
+    parts = {"model": model, "imagine": imagine}
+    return validate(from_preset("paper", **{**base, "chunk_iterations": 2, **parts, **overrides}))
 
 
 # -- the rules' numbers ----------------------------------------------------------------------
 
 
 def test_the_horizon_schedule_grows_linearly_between_its_step_counts():
-    config = ModelConfig(horizon_min=1, horizon_max=15, horizon_from=20_000, horizon_to=100_000)
+    config = StopConfig(horizon_min=1, horizon_max=15, horizon_from=20_000, horizon_to=100_000)
     steps = jnp.array([0, 20_000, 40_000, 59_999, 60_000, 100_000, 10**7])
     expected = [1, 1, 4, 7, 8, 15, 15]  # 1 + 14 x (t - 20k) / 80k, rounded down
     assert np.asarray(scheduled_horizon(config, steps)).tolist() == expected
-    flat = ModelConfig(horizon_min=3, horizon_max=3, horizon_from=5, horizon_to=5)
+    flat = StopConfig(horizon_min=3, horizon_max=3, horizon_from=5, horizon_to=5)
     assert np.asarray(scheduled_horizon(flat, jnp.array([0, 5, 6]))).tolist() == [3, 3, 3]
 
 
@@ -68,7 +67,7 @@ def test_macuras_threshold_is_a_scaled_quantile_of_the_first_steps_disagreement(
     assert float(macura_threshold(first, 0.75, 2.0)) == pytest.approx(0.8)
     # Position 0.9 x 4 = 3.6: 0.4 + 0.6 x 0.1.
     assert float(macura_threshold(first, 0.9, 1.0)) == pytest.approx(0.46)
-    rule = stop_rule(ModelConfig(), "macura", threshold=jnp.float32(0.46))
+    rule = stop_rule(StopConfig(), "macura", threshold=jnp.float32(0.46))
     d = jnp.array([0.1, 0.46, 0.47, 3.0])
     view = StepView(*(jnp.zeros((4, 1)),) * 3, jnp.zeros(4), d, jnp.ones(4, bool))
     assert np.asarray(rule(jax.random.key(0), view)).tolist() == [False, False, True, True]
@@ -211,8 +210,8 @@ def test_a_branch_starts_from_a_state_in_the_real_buffer():
     for t in np.flatnonzero(played):
         time = np.where(starts[t], 1, time + 1)
         assert (time <= 4).all()
-    # `model.start_window`: every branch starts from one of the newest 5 transitions.
-    trainer = Trainer(_config(model={"start_window": 5}))
+    # `imagine.start_window`: every branch starts from one of the newest 5 transitions.
+    trainer = Trainer(_config(imagine={"start_window": 5}))
     _, episodes = jax.jit(trainer.imagine_stage)(state, jax.random.key(4), jnp.float32(1.0), real)
     steps = episodes.steps
     starts = np.concatenate([np.ones((1, steps.done.shape[1]), bool), np.asarray(steps.done[:-1])])
@@ -235,11 +234,11 @@ def _stages(trainer: Trainer):
 
 
 def test_a_quarter_actor_step_moves_the_actor_less_on_imagined_rows_only():
-    """`model.imagined_actor_step` 0.25: the branched stage moves the actor, by less than the
+    """`imagine.actor_step` 0.25: the branched stage moves the actor, by less than the
     whole step does, and the real stage is the whole learner's."""
     change = {}
     for share in (1.0, 0.25):
-        trainer = Trainer(_config(model={"imagined_actor_step": share}))
+        trainer = Trainer(_config(imagine={"actor_step": share}))
         state, real_state, after = _stages(trainer)
         size = lambda a, b: sum(
             float(np.abs(np.asarray(x) - np.asarray(y)).sum())
@@ -254,11 +253,11 @@ def test_a_quarter_actor_step_moves_the_actor_less_on_imagined_rows_only():
 
 
 def test_critic_only_imagination_moves_the_critic_and_leaves_the_actor():
-    """`model.imagined_updates` "critic": the branched stage's updates train the critic, and
+    """`imagine.updates` "critic": the branched stage's updates train the critic, and
     the actor's parameters and optimiser moments stay as they were; "all" moves both."""
     moved = {}
     for updates in ("all", "critic"):
-        trainer = Trainer(_config(model={"imagined_updates": updates}))
+        trainer = Trainer(_config(imagine={"updates": updates}))
         state, _, after = _stages(trainer)
         differ = lambda a, b: any(
             not np.array_equal(x, y)
@@ -283,11 +282,11 @@ def test_critic_only_imagination_moves_the_critic_and_leaves_the_actor():
 
 
 def test_imagined_epochs_set_the_passes_over_imagined_rows_only():
-    """`model.imagined_epochs`: the branched stage's PPO updates make that many passes (Adam's
+    """`imagine.epochs`: the branched stage's PPO updates make that many passes (Adam's
     step count grows in proportion), while the real stage keeps the learner's own."""
     steps = {}
     for epochs in (0, 3):
-        config = _config(algo="ppo-model", model={"imagined_epochs": epochs})
+        config = _config(algo="ppo-model", imagine={"epochs": epochs})
         trainer = Trainer(config)
         state, real_state, after = _stages(trainer)
         count = lambda s: max(
@@ -296,7 +295,7 @@ def test_imagined_epochs_set_the_passes_over_imagined_rows_only():
             if "count" in jax.tree_util.keystr(p)
         )
         steps[epochs] = (count(real_state) - count(state), count(after) - count(state))
-    own = config.agent.epochs  # 0 takes the learner's own
+    own = config.ppo.epochs  # 0 takes the learner's own
     assert own != 3 and steps[0][0] > 0 and steps[0][0] == steps[3][0]
     assert steps[3][1] > 0 and steps[0][1] * 3 == steps[3][1] * own
 
@@ -304,7 +303,7 @@ def test_imagined_epochs_set_the_passes_over_imagined_rows_only():
 @pytest.fixture(scope="module")
 def branched_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("branched")
-    config = _config(model={"real_share": 0.25})
+    config = _config(imagine={"real_share": 0.25})
     # Compiled bitwise, so that the split over two devices below can be held to it.
     summary = train(config, out, checkpoint_every=1, quiet=True, bitwise=True)
     return config, out, summary
@@ -318,14 +317,14 @@ def test_imagined_counts_are_the_played_weights_and_meet_the_ratio(branched_run)
     trainer = Trainer(config)
     final = RunDir(out).restore_final(jax.eval_shape(trainer.init_batch))
     lines = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
-    row = config.model.branches * config.agent.n_steps  # every imagined row is live
+    row = config.imagine.branches * config.agent.n_steps  # every imagined row is live
     for seed in range(config.seeds):
         mine = [line for line in lines if line["seed"] == seed]
         imagined = np.diff([0] + [line["imagined_steps"] for line in mine])
         real = np.diff([0] + [line["env_steps"] for line in mine])
         assert (imagined % row == 0).all() and (imagined > 0).all()
-        assert (imagined >= config.model.imagined_ratio * real).all()
-        assert (imagined < config.model.imagined_ratio * real + row).all()
+        assert (imagined >= config.imagine.ratio * real).all()
+        assert (imagined < config.imagine.ratio * real + row).all()
         assert int(final.imagined_steps[0, seed]) == mine[-1]["imagined_steps"]
 
 
@@ -352,56 +351,59 @@ def _build(*argv):
     "argv, needle",
     [
         (
-            ["--algo", "ppo-model", "--set", "model.stop=mbpo", "--set", "model.horizon_min=9",
-             "--set", "model.horizon_max=3"],
+            ["--algo", "ppo-model", "--set", "stop.rule=mbpo", "--set", "stop.horizon_min=9",
+             "--set", "stop.horizon_max=3"],
             "needs 1 <= horizon_min <= horizon_max, got 9 and 3",
         ),
-        (["--algo", "ldn", "--set", "model.real_share=1.5"], "real_share must be in [0, 1), got"),
-        (["--algo", "ldn", "--set", "model.real_share=-0.1"], "real_share must be in [0, 1)"),
-        (["--algo", "ppo", "--set", "model.imagine_start=real"], "ppo imagines none"),
-        (["--algo", "a2c", "--set", "model.imagine_start=real"], "a2c imagines none"),
+        (["--algo", "ldn", "--set", "imagine.real_share=1.5"], "real_share must be in [0, 1), got"),
+        (["--algo", "ldn", "--set", "imagine.real_share=-0.1"], "real_share must be in [0, 1)"),
+        (["--algo", "ppo", "--set", "imagine.start=real"], "ppo imagines none"),
+        (["--algo", "a2c", "--set", "imagine.start=real"], "a2c imagines none"),
         (["--algo", "ldn", "--stop", "macura", "--ld", "m0"], "stop 'macura' reads the"),
         (["--algo", "ldn", "--stop", "m2ac", "--ld", "m0"], "stop 'm2ac' reads the disagreement"),
         (["--algo", "ldn", "--set", "model.ld=variance"], "it needs model.probabilistic"),
         (["--algo", "ldn", "--ld", "ensemble", "--set", "model.elites=9"], "elites must be in [1,"),
-        (["--algo", "ldn", "--set", "model.branches=0"], "branches must be >= 1"),
-        (["--algo", "ldn", "--set", "model.imagined_std=fixed"], "unknown imagined_std 'fixed'"),
+        (["--algo", "ldn", "--set", "imagine.branches=0"], "branches must be >= 1"),
+        (["--algo", "ldn", "--set", "imagine.std=fixed"], "unknown imagine.std 'fixed'"),
         (["--algo", "ldn", "--set", "model.imagined_step=mode"], "unknown imagined_step 'mode'"),
         (["--algo", "ldn", "--set", "model.imagined_step=mean"], "it needs model.probabilistic"),
-        (["--algo", "ppo-model", "--set", "model.imagined_std=real"], "needs branched imagination"),
-        (["--algo", "ldn", "--set", "model.imagined_updates=actor"], "unknown imagined_updates"),
+        (["--algo", "ppo-model", "--set", "imagine.std=real"], "needs branched imagination"),
+        (["--algo", "ldn", "--set", "imagine.updates=actor"], "unknown imagine.updates"),
         (
             ["--algo", "ldn", "--preset", "branched", "--env", "cartpole-v1",
-             "--set", "model.imagined_epochs=2"],
+             "--set", "imagine.epochs=2"],
             "ldn is of the A2C family",
         ),
-        (["--algo", "ppo-model", "--set", "model.imagined_epochs=2"], "needs imagine_start 'real'"),
-        (["--algo", "ppo-model", "--set", "model.imagined_epochs=-1"], "must be >= 0, got -1"),
-        (["--algo", "ppo-model", "--set", "model.start_window=100"], "needs imagine_start 'real'"),
+        (["--algo", "ppo-model", "--set", "imagine.epochs=2"], "needs imagine.start 'real'"),
+        (["--algo", "ppo-model", "--set", "imagine.epochs=-1"], "must be >= 0, got -1"),
         (
-            ["--algo", "ppo-model", "--preset", "branched", "--set", "model.start_window=-1"],
+            ["--algo", "ppo-model", "--set", "imagine.start_window=100"],
+            "needs imagine.start 'real'",
+        ),
+        (
+            ["--algo", "ppo-model", "--preset", "branched", "--set", "imagine.start_window=-1"],
             "start_window must be >= 0, got -1",
         ),
         (
-            ["--algo", "ppo-model", "--set", "model.imagined_updates=critic"],
-            "imagined_updates 'critic' needs branched imagination",
+            ["--algo", "ppo-model", "--set", "imagine.updates=critic"],
+            "imagine.updates 'critic' needs branched imagination",
         ),
         (
-            ["--algo", "ppo-model", "--preset", "branched", "--set", "model.imagined_actor_step=2"],
-            "imagined_actor_step must be in [0, 1], got 2",
+            ["--algo", "ppo-model", "--preset", "branched", "--set", "imagine.actor_step=2"],
+            "imagine.actor_step must be in [0, 1], got 2",
         ),
         (
-            ["--algo", "ppo-model", "--set", "model.imagined_actor_step=0.5"],
-            "needs imagine_start 'real' and imagined_updates 'all'",
+            ["--algo", "ppo-model", "--set", "imagine.actor_step=0.5"],
+            "needs imagine.start 'real' and imagine.updates 'all'",
         ),
         (
             ["--algo", "ppo-model", "--preset", "branched",
-             "--set", "model.imagined_updates=critic", "--set", "model.imagined_actor_step=0.5"],
-            "needs imagine_start 'real' and imagined_updates 'all'",
+             "--set", "imagine.updates=critic", "--set", "imagine.actor_step=0.5"],
+            "needs imagine.start 'real' and imagine.updates 'all'",
         ),
         (
             ["--algo", "ppo-model", "--preset", "branched", "--env", "cartpole-v1",
-             "--set", "model.imagined_std=real"],
+             "--set", "imagine.std=real"],
             "a state-independent log std",
         ),
     ],
@@ -413,7 +415,7 @@ def test_bad_branched_settings_are_one_line(argv, needle):
 
 
 def test_macura_defaults_its_estimator_to_the_ensemble():
-    config = _build("--algo", "ppo-model", "--stop", "macura", "--set", "model.imagine_start=real")
+    config = _build("--algo", "ppo-model", "--stop", "macura", "--set", "imagine.start=real")
     assert config.model.ld == "ensemble" and config.stop_rule == "macura"
 
 
@@ -437,7 +439,7 @@ def test_a_branched_run_split_over_two_devices_is_the_one_device_run_bitwise(
 def test_the_branched_preset_gives_its_model_to_model_based_algorithms_only(algo):
     config = validate(from_preset("branched", env="halfcheetah", algo=algo))
     model_based = algo not in ("ppo", "a2c")
-    assert (config.model.imagine_start == "real") == model_based
+    assert (config.imagine.start == "real") == model_based
     assert config.model.probabilistic == model_based
     assert config.schedule == "steps" and config.k == (1.0,)
     # The model-free learner runs with the same constants beside its model-based variants.
@@ -446,7 +448,7 @@ def test_the_branched_preset_gives_its_model_to_model_based_algorithms_only(algo
     if algo.startswith("ppo"):  # two of the PPO's 64-step rollouts per iteration
         assert config.iteration_steps == 128
     paper = from_preset("paper", env="halfcheetah", algo=algo)
-    assert paper.model.imagine_start == "initial"
+    assert paper.imagine.start == "initial"
     # halfcheetah's PPO is the zoo's under every preset (the task's default); A2C's is not
     assert config.agent == paper.agent
     assert paper.agent.hidden_layers == (2 if algo.startswith("ppo") else 1)
@@ -456,15 +458,13 @@ def test_hoppers_branched_preset_trains_the_critic_only_on_imagined_rows():
     """hopper's measured default under `branched`: imagined rows train the critic only, for
     every model-based algorithm; the model-free learner beside them has no model settings."""
     for algo in ("ppo-model", "ppo-ldn", "a2c-model", "ldn"):
-        assert validate(
-            from_preset("branched", env="hopper", algo=algo)
-        ).model.imagined_updates == ("critic")
-        assert validate(
-            from_preset("branched", env="halfcheetah", algo=algo)
-        ).model.imagined_updates == ("all")
-    assert validate(from_preset("branched", env="hopper", algo="ppo")).model.imagine_start == (
-        "initial"
-    )
+        assert validate(from_preset("branched", env="hopper", algo=algo)).imagine.updates == (
+            "critic"
+        )
+        assert validate(from_preset("branched", env="halfcheetah", algo=algo)).imagine.updates == (
+            "all"
+        )
+    assert validate(from_preset("branched", env="hopper", algo="ppo")).imagine.start == ("initial")
 
 
 def test_explain_names_the_preset_env_and_learner_layer():
@@ -527,11 +527,11 @@ def test_the_m0_reading_of_a_probabilistic_ensemble_is_eq3_on_the_drawn_member()
 
 def test_the_branch_cut_is_its_own_flag_and_horizon_keeps_its_meaning():
     config = _build("--env", "halfcheetah", "--algo", "ppo-ldn", "--preset", "branched")
-    assert (config.model.cut, config.model.horizon) == (15, 5)
+    assert (config.imagine.cut, config.stop.horizon) == (15, 5)
     config = _build(
         "--env", "halfcheetah", "--algo", "ppo-ldn", "--preset", "branched", "--cut", "7"
     )
-    assert config.model.cut == 7
+    assert config.imagine.cut == 7
     for argv, needle in [
         (["--algo", "ldn", "--cut", "7"], "--cut needs branches"),
         (["--algo", "ppo-model", "--preset", "branched", "--cut", "0"], "cut must be >= 1"),
@@ -542,20 +542,47 @@ def test_the_branch_cut_is_its_own_flag_and_horizon_keeps_its_meaning():
             _build(*argv)
 
 
+def _before_sections(config) -> dict:
+    """`config`'s config.json as it was written before `ModelConfig` and `AgentConfig` were
+    split: every moved field back in `model` or `agent` under its old name."""
+    from ldn_jax.config import ALIASES
+
+    data = config.to_dict()
+    for old, new in ALIASES.items():
+        (was, key), (now, new_key) = old.split("."), new.split(".")
+        data[was][key] = data[now].pop(new_key)
+    for section in ("ppo", "stop", "imagine"):
+        assert data.pop(section) == {}
+    return data
+
+
+def test_a_config_json_from_before_the_sections_reads_as_the_same_config():
+    """Every field that moved to `ppo`, `stop` or `imagine` is read from its old place, and
+    its old dotted name still sets it."""
+    from ldn_jax.config import Config
+
+    config = from_preset("branched", env="hopper", algo="ppo-ldn", steps=1000, seeds=2)
+    old = _before_sections(config)
+    assert old["model"]["imagine_start"] == "real" and old["agent"]["epochs"] == 10
+    assert Config.from_dict(old) == config
+    assert _build("--algo", "ppo", "--set", "agent.epochs=3").ppo.epochs == 3
+    assert _build("--algo", "ldn", "--set", "model.stop=oracle").stop.rule == "oracle"
+
+
 def test_a_run_from_before_the_cut_field_reads_its_horizon_as_the_cut():
-    """config.json of a branched run written before `model.cut` existed: its horizon was
-    the branch cut, so it loads as that cut (and a cached run of it is the same config)."""
+    """config.json of a branched run written before `cut` existed: its horizon was the
+    branch cut, so it loads as that cut (and a cached run of it is the same config)."""
     from ldn_jax.config import Config
 
     new = from_preset("branched", env="halfcheetah", algo="ppo-ldn", steps=1000)
-    old = new.to_dict()
+    old = _before_sections(new)
     cut = old["model"].pop("cut")
     old["model"] = {**old["model"], "horizon": cut}
     assert old["model"]["horizon"] == 15
     assert Config.from_dict(old) == new
-    initial = from_preset("paper", env="cartpole-v1", algo="ldn").to_dict()
+    initial = _before_sections(from_preset("paper", env="cartpole-v1", algo="ldn"))
     initial["model"].pop("cut")
-    assert Config.from_dict(initial).model.cut == ModelConfig.cut
+    assert Config.from_dict(initial).imagine.cut == ImagineConfig.cut
 
 
 def test_the_fit_until_stalled_stops_on_the_held_out_error_and_keeps_each_members_best():

@@ -69,5 +69,5 @@ def _all_trace(combinations) -> None:
 
 
 def test_macura_without_branches_is_refused():
-    with pytest.raises(ValueError, match="needs imagine_start 'real'"):
+    with pytest.raises(ValueError, match=r"needs imagine\.start 'real'"):
         _config("ppo-ldn", "macura", "initial", "ensemble", False)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from ldn_jax.config import Config, fields, from_preset, get_field
+from ldn_jax.config import SECTIONS, Config, fields, from_preset, get_field
 from ldn_jax.host import flags
 from ldn_jax.host.settings import UsageError
 
@@ -29,7 +29,7 @@ def refused(*argv: str) -> str:
 
 def test_the_field_table_is_read_off_the_dataclasses():
     table = fields()
-    assert not {"preset", "sweep", "agent", "model"} & set(table)
+    assert not {"preset", "sweep", *SECTIONS} & set(table)
     assert table["agent.actor_lr"].base is float and table["seeds"].base is int
     assert table["agent.normalize_obs"].base is bool and table["model.ld"].base is str
     assert table["steps"].optional and table["model.support"].optional
@@ -37,12 +37,12 @@ def test_the_field_table_is_read_off_the_dataclasses():
     # every field the dataclasses declare, nothing else
     import dataclasses
 
-    from ldn_jax.config import AgentConfig, ModelConfig
-
-    declared = {f.name for f in dataclasses.fields(Config)} - {"preset", "sweep", "agent", "model"}
-    declared |= {f"agent.{f.name}" for f in dataclasses.fields(AgentConfig)}
-    declared |= {f"model.{f.name}" for f in dataclasses.fields(ModelConfig)}
+    declared = {f.name for f in dataclasses.fields(Config)} - {"preset", "sweep", *SECTIONS}
+    for section, kind in SECTIONS.items():
+        declared |= {f"{section}.{f.name}" for f in dataclasses.fields(kind)}
     assert set(table) == declared
+    # no section over 25 fields
+    assert max(len(dataclasses.fields(kind)) for kind in SECTIONS.values()) <= 25
     # the named flags are short names for fields of the table
     assert set(flags.CONFIG_FLAGS.values()) - {"preset"} <= set(table)
 
@@ -69,8 +69,8 @@ def test_set_reaches_every_kind_of_field(setting, name, value):
 
 
 def test_set_over_the_presets_and_per_learner_defaults():
-    config = build("--algo", "ppo", "--set", "agent.epochs=2")
-    assert config.agent.epochs == 2 and config.agent.n_steps == 100  # PPO's other defaults
+    config = build("--algo", "ppo", "--set", "ppo.epochs=2")
+    assert config.ppo.epochs == 2 and config.agent.n_steps == 100  # PPO's other defaults
     config = build("--env", "hopper", "--set", "model.support=none")
     assert config.model.support is None and config.model.normalize  # MuJoCo's model defaults
     config = build("--preset", "tutorial", "--set", "agent.gamma=0.95")
@@ -87,7 +87,7 @@ def test_set_over_the_presets_and_per_learner_defaults():
         (["--set", "agent.gamma=none"], "agent.gamma takes float, got 'none'"),
         (["--set", "agent.gamma=2"], "gamma must be in (0, 1], got 2.0"),
         (["--set", "model.lr=-1"], "model lr must be > 0"),
-        (["--algo", "ppo", "--set", "agent.target_kl=0"], "target_kl must be > 0 (or None"),
+        (["--algo", "ppo", "--set", "ppo.target_kl=0"], "target_kl must be > 0 (or None"),
         (["--algo", "ppo", "--set", "agent.obs_clip=0"], "obs_clip must be > 0, got 0"),
         (["--set", "actor_lr"], "--set needs FIELD=VALUE"),
         (["--k", "1", "--set", "k=2"], "k is already given by --k 1"),
@@ -102,7 +102,7 @@ def test_config_files_in_toml_and_json(tmp_path):
     toml = tmp_path / "ppo.toml"
     toml.write_text('env = "cartpole-v1"\nalgo = "ppo"\n[agent]\nactor_lr = 1e-4\nepochs = 3\n')
     config = build("--config", str(toml))
-    assert (config.env, config.algo, config.agent.actor_lr, config.agent.epochs) == (
+    assert (config.env, config.algo, config.agent.actor_lr, config.ppo.epochs) == (
         "cartpole-v1",
         "ppo",
         1e-4,
@@ -110,8 +110,8 @@ def test_config_files_in_toml_and_json(tmp_path):
     )
     assert config.agent.n_steps == 100  # not in the file: PPO's default
     # flags and then --set override the file
-    config = build("--config", str(toml), "--env", "cartpole-v0", "--set", "agent.epochs=7")
-    assert (config.env, config.agent.epochs, config.agent.actor_lr) == ("cartpole-v0", 7, 1e-4)
+    config = build("--config", str(toml), "--env", "cartpole-v0", "--set", "ppo.epochs=7")
+    assert (config.env, config.ppo.epochs, config.agent.actor_lr) == ("cartpole-v0", 7, 1e-4)
     as_json = tmp_path / "c.json"
     as_json.write_text(json.dumps({"k": [1, 2], "threshold": 3, "model": {"support": "none"}}))
     config = build("--config", str(as_json))
@@ -220,5 +220,5 @@ def test_a_value_no_run_could_use_is_refused_whatever_the_algorithm():
     assert (
         refused("--algo", "a2c", "--set", "model.hidden=-5") == "model hidden must be >= 1, got -5"
     )
-    assert "horizon must be >= 1" in refused("--algo", "ldn", "--set", "model.horizon=0")
+    assert "horizon must be >= 1" in refused("--algo", "ldn", "--set", "stop.horizon=0")
     assert "agent.critic_lr must be a finite number" in refused("--set", "agent.critic_lr=inf")

@@ -276,9 +276,9 @@ def test_continuous_defaults_normalise_the_model():
     cartpole = from_preset("paper", env="cartpole-v1", algo="ldn")
     assert not cartpole.model.normalize and cartpole.agent.actor_lr == 1e-3
     ppo = from_preset("paper", env="inverted_pendulum", algo="ppo-ldn")
-    assert ppo.agent.value_clip is None and (ppo.agent.epochs, ppo.agent.minibatches) == (10, 10)
-    assert ppo.model.imagine == "memory"
-    assert from_preset("paper", env="cartpole-v1", algo="ppo").agent.value_clip == 0.2
+    assert ppo.ppo.value_clip is None and (ppo.ppo.epochs, ppo.ppo.minibatches) == (10, 10)
+    assert ppo.imagine.mode == "memory"
+    assert from_preset("paper", env="cartpole-v1", algo="ppo").ppo.value_clip == 0.2
 
 
 @pytest.mark.mujoco
@@ -349,7 +349,7 @@ def test_an_unknown_initialiser_is_refused():
 
 
 def test_kept_leaves_leave_the_log_std_and_its_adam_moments_as_they_were():
-    """Branched imagination's `model.imagined_std` "real": an update on imagined rows moves
+    """Branched imagination's `imagine.std` "real": an update on imagined rows moves
     every parameter but the log std, whose value and optimiser moments stay the old ones."""
     from ldn_jax.rollout import keep_leaves
 
@@ -390,15 +390,15 @@ def test_kept_leaves_leave_the_log_std_and_its_adam_moments_as_they_were():
 
 
 def test_a_frozen_actor_takes_no_step_and_leaves_the_clip_and_kl_to_the_critic():
-    """`freezing` (branched `model.imagined_updates` "critic"): PPO's update moves the critic
+    """`freezing` (branched `imagine.updates` "critic"): PPO's update moves the critic
     only, the actor and log std stay exact, so its approximate KL is 0 and the KL guard never
     stops it."""
-    agent = from_preset(
+    config = from_preset(
         "paper", algo="ppo",
-        agent={"log_std_init": 0.0, "actor_lr": 1e-2, "critic_lr": 1e-2, "target_kl": 1e-4,
-               "max_grad_norm": 0.05, "normalize_obs": True},
-    ).agent  # fmt: skip
-    learner = PPO(agent, obs_size=2, action_spec=Box((-1.0,), (1.0,)))
+        agent={"log_std_init": 0.0, "actor_lr": 1e-2, "critic_lr": 1e-2, "normalize_obs": True},
+        ppo={"target_kl": 1e-4, "max_grad_norm": 0.05},
+    )  # fmt: skip
+    learner = PPO(config.agent, obs_size=2, action_spec=Box((-1.0,), (1.0,)), ppo=config.ppo)
     start, _ = jax.jit(learner.update)(
         learner.init(jax.random.key(0)), _bandit_segment(jax.random.key(1)), jax.random.key(4)
     )
@@ -420,7 +420,7 @@ def test_a_frozen_actor_takes_no_step_and_leaves_the_clip_and_kl_to_the_critic()
 
 
 def test_a_scaled_actor_steps_that_share_of_its_whole_step_and_the_critic_its_own():
-    """`scaling` (branched `model.imagined_actor_step`): one optimiser step moves the actor
+    """`scaling` (branched `imagine.actor_step`): one optimiser step moves the actor
     and log std by `scale` times the unscaled step from the same gradients, the critic by
     the same step, and the optimiser's moments are the unscaled learner's."""
     agent = from_preset("paper", algo="a2c", agent={"log_std_init": 0.0}).agent

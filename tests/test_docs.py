@@ -156,7 +156,7 @@ def test_the_choice_table_is_what_validate_accepts():
         overrides = {section: bad} if section else bad
         with pytest.raises(ValueError):
             validate(from_preset("paper", **{"env": "cartpole-v1", **overrides}))
-    assert Config().model.stop is None  # the algorithm's own rule: not one of the names
+    assert Config().stop.rule is None  # the algorithm's own rule: not one of the names
 
 
 def test_the_user_guide_holds_no_dated_log():

@@ -13,7 +13,7 @@ import pytest
 
 from ldn_jax import load_policy
 from ldn_jax.buffer import buffer_add, buffer_init
-from ldn_jax.config import AgentConfig, Config, ModelConfig, from_preset, validate
+from ldn_jax.config import AgentConfig, Config, ModelConfig, StopConfig, from_preset, validate
 from ldn_jax.dynamics import Dynamics, ModelState
 from ldn_jax.host import checkpoint
 from ldn_jax.host.run_dir import FINAL as FINAL_CHECKPOINT
@@ -281,4 +281,4 @@ def test_resume_refuses_a_different_estimator(ensemble_run, flag):
 
 def _rule(ld_stop: bool):
     """The LD draw (ldn) or no stop (a2c-model)."""
-    return stop_rule(ModelConfig(), "ld" if ld_stop else "none")
+    return stop_rule(StopConfig(), "ld" if ld_stop else "none")

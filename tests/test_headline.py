@@ -16,13 +16,13 @@ def test_the_arms_are_the_plans():
         assert (config.seeds, config.first_seed, config.steps) == (10, 10, 200_000)
         assert config.preset == "branched" and config.k == (1.0,)
     for env, epochs in (("halfcheetah", 20), ("hopper", 10)):
-        assert configs[env, "ppo"].agent.epochs == epochs
-        assert configs[env, "ppo-steps"].agent.epochs == 2 * epochs
+        assert configs[env, "ppo"].ppo.epochs == epochs
+        assert configs[env, "ppo-steps"].ppo.epochs == 2 * epochs
         assert configs[env, "ppo-steps"].model == configs[env, "ppo"].model
-        cap = configs[env, "ppo-ldn"].model.cut
+        cap = configs[env, "ppo-ldn"].imagine.cut
         assert cap == {"halfcheetah": 15, "hopper": 5}[env]
         assert configs[env, "ppo-model"].stop_rule == "none"
-        assert configs[env, "ppo-model"].model.cut == cap
+        assert configs[env, "ppo-model"].imagine.cut == cap
         assert configs[env, "ppo-ldn"].model.ld == "ensemble"
         m0 = configs[env, "ppo-ldn-m0"]
         assert m0.model.ld == "m0" and m0.stop_rule == "ld" and m0.model.probabilistic

@@ -522,7 +522,7 @@ def test_the_halfcheetah_rules_take_their_own_budget_seeds_and_directories():
         out = stops.dir_of(results, scale, config, name)
         assert out == Path(f"r/runs/cpu/stops-halfcheetah-{name}")  # not Table 4's 200k run
     # The oracle can run on halfcheetah now, but the study leaves it to CartPole.
-    assert stops.config_of(scale, "halfcheetah", *stops.RULES["oracle"][:3]).model.stop == "oracle"
+    assert stops.config_of(scale, "halfcheetah", *stops.RULES["oracle"][:3]).stop.rule == "oracle"
     assert stops.ensure(results, scale, "halfcheetah", "oracle", *stops.RULES["oracle"][:3]) is None
     # The smoke scale keeps its own budgets; CartPole's rules keep the scale's episodes.
     smoke = stops.config_of(report.common.SCALES["smoke"], "inverted_pendulum", "a2c-model", {})
@@ -977,7 +977,7 @@ def test_the_branched_study_adds_seeds_to_a_finished_run_and_merges_their_rows(
     assert branched_rules.config_of("hopper", "ld", 5, 100, first_seed=5).first_seed == 5
     # The study's rules keep their meaning whatever the preset's task default: on hopper
     # (whose preset trains the critic only on imagined rows) only the rules that say so do.
-    updates = lambda rule: branched_rules.config_of("hopper", rule, 5, 100).model.imagined_updates
+    updates = lambda rule: branched_rules.config_of("hopper", rule, 5, 100).imagine.updates
     assert [updates(r) for r in ("cap-5", "ld", "critic-5", "ld-critic-5")] == [
         "all", "all", "critic", "critic"
     ]  # fmt: skip

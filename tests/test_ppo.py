@@ -7,12 +7,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from ldn_jax.config import AgentConfig, from_preset
+from ldn_jax.config import AgentConfig, PPOConfig, from_preset
 from ldn_jax.learners import A2C, PPO
 from ldn_jax.learners.base import Segment, canonical
 from ldn_jax.learners.ppo import Batch, clipped_surrogate, gae
 
-PPO_AGENT = from_preset("paper", algo="ppo").agent
+PPO_CONFIG = from_preset("paper", algo="ppo")
+PPO_AGENT, PPO_OWN = PPO_CONFIG.agent, PPO_CONFIG.ppo
 
 
 def test_clipped_surrogate_hand_computed():
@@ -114,8 +115,8 @@ def _assert_trees_equal(a, b):
 
 @pytest.mark.parametrize("learner_cls", [A2C, PPO])
 def test_masked_steps_change_nothing_bitwise(learner_cls):
-    agent = PPO_AGENT if learner_cls is PPO else AgentConfig()
-    learner = learner_cls(agent, obs_size=4, action_spec=2)
+    config = PPO_CONFIG if learner_cls is PPO else from_preset("paper", algo="a2c")
+    learner = learner_cls.of(config, obs_size=4, action_spec=2)
     state = learner.init(jax.random.key(0))
     # Imagined-looking segment: workers stopped after 1, 3, 7 and all 12 steps.
     segment = _segment(jax.random.key(1), 12, 4, dead_from=[1, 3, 7, 12])
@@ -135,7 +136,7 @@ def test_ppo_masked_row_far_in_a_narrow_gaussians_tail_keeps_gradients_finite():
     # The canonical (zeroed) masked rows have action 0; a policy whose mean is 0.9 with std
     # 1e-4 gives them log pi = -4e7, so their log-ratio overflows exp after one Adam step.
     spec = SimpleNamespace(discrete=False, size=1, low=(-1.0,), high=(1.0,))
-    learner = PPO(PPO_AGENT, obs_size=3, action_spec=spec)
+    learner = PPO(PPO_AGENT, obs_size=3, action_spec=spec, ppo=PPO_OWN)
     state = learner.init(jax.random.key(0))
     bias = state.params["actor"]["params"]
     last = sorted(bias)[-1]
@@ -165,8 +166,8 @@ def test_ppo_masked_row_far_in_a_narrow_gaussians_tail_keeps_gradients_finite():
 
 
 def test_imaginary_memory_learns_only_from_whole_rollouts_in_arrival_order():
-    agent = from_preset("paper", algo="ppo", agent={"n_steps": 5, "epochs": 2}).agent
-    learner = PPO(agent, obs_size=4, action_spec=2)
+    config = from_preset("paper", algo="ppo", agent={"n_steps": 5}, ppo={"epochs": 2})
+    learner = PPO(config.agent, obs_size=4, action_spec=2, ppo=config.ppo)
     state = learner.init(jax.random.key(0))
     memory = learner.memory_init(workers=3)  # 15 rows
     learn = jax.jit(learner.learn_from_memory)
@@ -196,8 +197,8 @@ def test_imaginary_memory_learns_only_from_whole_rollouts_in_arrival_order():
 
 @pytest.mark.parametrize("value_clip", [None, 0.2])
 def test_value_loss_is_clipped_around_v_old_only_with_a_value_clip(value_clip):
-    agent = from_preset("paper", algo="ppo", agent={"value_clip": value_clip}).agent
-    learner = PPO(agent, obs_size=2, action_spec=2)
+    config = from_preset("paper", algo="ppo", ppo={"value_clip": value_clip})
+    learner = PPO(config.agent, obs_size=2, action_spec=2, ppo=config.ppo)
     params = learner.init(jax.random.key(0)).params
     obs = jax.random.normal(jax.random.key(1), (6, 2))
     value = learner.value(params, obs)
@@ -215,7 +216,7 @@ def test_value_loss_is_clipped_around_v_old_only_with_a_value_clip(value_clip):
 
 
 def test_ppo_fully_masked_segment_leaves_state_bitwise_unchanged():
-    learner = PPO(PPO_AGENT, obs_size=4, action_spec=2)
+    learner = PPO(PPO_AGENT, obs_size=4, action_spec=2, ppo=PPO_OWN)
     state = learner.init(jax.random.key(0))
     segment = _segment(jax.random.key(1), 10, 3)
     dead = segment.replace(weight=jnp.zeros_like(segment.weight))
@@ -224,8 +225,8 @@ def test_ppo_fully_masked_segment_leaves_state_bitwise_unchanged():
 
 
 def test_ppo_any_row_count_pads_to_whole_minibatches():
-    agent = from_preset("paper", algo="ppo", agent={"minibatches": 4, "epochs": 2}).agent
-    learner = PPO(agent, obs_size=3, action_spec=2)
+    config = from_preset("paper", algo="ppo", ppo={"minibatches": 4, "epochs": 2})
+    learner = PPO(config.agent, obs_size=3, action_spec=2, ppo=config.ppo)
     state = learner.init(jax.random.key(0))
     segment = _segment(jax.random.key(1), 7, 3, obs_size=3)  # 21 rows, 4 minibatches
     new, info = jax.jit(learner.update)(state, segment, jax.random.key(2))
@@ -237,7 +238,7 @@ def test_ppo_any_row_count_pads_to_whole_minibatches():
 
 def test_ppo_update_raises_probability_of_the_better_action():
     # A bandit: action 0 pays 1, action 1 pays 0; one-step episodes, no bootstrap.
-    learner = PPO(PPO_AGENT, obs_size=2, action_spec=2)
+    learner = PPO(PPO_AGENT, obs_size=2, action_spec=2, ppo=PPO_OWN)
     state = learner.init(jax.random.key(0))
     n, workers = 16, 8
     action = jnp.tile(jnp.arange(workers) % 2, (n, 1))
@@ -258,15 +259,13 @@ def test_ppo_update_raises_probability_of_the_better_action():
 
 
 def test_target_kl_stops_an_update_at_the_first_minibatch_past_it():
-    agent = lambda target: (
-        from_preset(
-            "paper", algo="ppo", agent={"minibatches": 4, "epochs": 3, "target_kl": target}
-        ).agent
+    own = lambda target: from_preset(
+        "paper", algo="ppo", ppo={"minibatches": 4, "epochs": 3, "target_kl": target}
     )
     segment = _segment(jax.random.key(1), 8, 4)
     runs = {}
     for target in (None, 1e9, 1e-9):
-        learner = PPO(agent(target), obs_size=4, action_spec=2)
+        learner = PPO.of(own(target), obs_size=4, action_spec=2)
         state = learner.init(jax.random.key(0))
         runs[target] = jax.jit(learner.update)(state, segment, jax.random.key(2))
     # Never reached: every step is taken (to float32 rounding: the guard's program fuses
@@ -290,8 +289,9 @@ def test_adams_epsilon_damps_the_steps_of_small_gradients():
     segment = _segment(jax.random.key(0), n=8, workers=4)
     moved = {}
     for eps in (1e-8, 1e3):
-        agent = AgentConfig(epochs=1, minibatches=1, value_clip=None, adam_eps=eps)
-        learner = PPO(agent, obs_size=4, action_spec=2)
+        agent = AgentConfig(adam_eps=eps)
+        one_step = PPOConfig(epochs=1, minibatches=1, value_clip=None)
+        learner = PPO(agent, obs_size=4, action_spec=2, ppo=one_step)
         state = learner.init(jax.random.key(1))
         new, _ = jax.jit(learner.update)(state, segment, jax.random.key(2))
         change = jax.tree.map(lambda a, b: jnp.abs(a - b).max(), new.params, state.params)

@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from ldn_jax.config import AgentConfig, ModelConfig, from_preset, validate
+from ldn_jax.config import AgentConfig, ModelConfig, StopConfig, from_preset, validate
 from ldn_jax.dynamics import Dynamics
 from ldn_jax.imagination import EnvFacts, _joined, ld_history, model_world, stop_rule
 from ldn_jax.learners.a2c import A2C
@@ -68,7 +68,9 @@ def test_imagined_steps_read_the_configured_deviation(reduce="sum", window=3, sc
     encode = lambda a: jax.nn.one_hot(a, 2)
     never = lambda obs: jnp.zeros(obs.shape[:-1], bool)
     gain = jnp.float32(0.5)
-    world = model_world(dynamics, model, EnvFacts(never, encode), gain, stop_rule(config, "none"))
+    world = model_world(
+        dynamics, model, EnvFacts(never, encode), gain, stop_rule(StopConfig(), "none")
+    )
     obs = jax.random.uniform(jax.random.key(2), (3, 4), minval=-0.05, maxval=0.05)
     _, episodes = jax.jit(play_episodes, static_argnums=2)(
         jax.random.key(3), learner.init(jax.random.key(4)), Player(learner, world, 12), obs,

@@ -85,3 +85,86 @@ def test_sac_solves_a_one_step_bandit():
     gap = jax.tree.map(lambda t, o: float(jnp.abs(t - o).max()), *(
         state.params["target"], state.params["critic"]))  # fmt: skip
     assert max(jax.tree.leaves(gap)) < 0.5
+
+
+# -- SAC in the trainer -----------------------------------------------------------------------
+
+SAC_RUN = dict(env="inverted_pendulum", algo="sac", seeds=2, steps=120, chunk_iterations=2)
+"""A tiny sac run: 2 seeds, 3 chunks of 2 iterations of 20 steps, updates from step 30."""
+SAC_RUN["iteration_steps"] = 20
+SAC_RUN["sac"] = {"learning_starts": 30, "hidden": 16, "batch_size": 8, "utd": 2}
+
+
+def test_the_replay_memory_takes_each_live_row_and_updates_start_at_learning_starts():
+    from ldn_jax.config import from_preset
+    from ldn_jax.envs.mujoco import ContinuousActions
+    from ldn_jax.learners.base import Segment
+    from ldn_jax.learners.sac import SACLearner
+
+    sac = {**SAC_RUN["sac"], "learning_starts": 20}
+    config = from_preset("paper", **{**SAC_RUN, "steps": 1000, "sac": sac})
+    learner = SACLearner.of(config, 3, ContinuousActions(2, (-1.0,) * 2, (1.0,) * 2))
+    assert learner.capacity == 1000  # the run's budget, below the memory's 1M
+    state = learner.init(jax.random.key(0))
+    keys = jax.random.split(jax.random.key(1), 5)
+    n, w = 4, 5  # 20 rows, 13 of them live
+    weight = jnp.ones((n, w)).at[:, 0].set(0.0).at[3, 1].set(0.0).at[2:, 2].set(0.0)
+    segment = Segment(
+        obs=jax.random.normal(keys[0], (n, w, 3)),
+        action=jax.random.uniform(keys[1], (n, w, 2), minval=-1, maxval=1),
+        reward=jax.random.normal(keys[2], (n, w)),
+        next_obs=jax.random.normal(keys[3], (n, w, 3)),
+        terminated=jnp.zeros((n, w), bool).at[1, 3].set(True),
+        done=jnp.zeros((n, w), bool).at[1, 3].set(True),
+        weight=weight,
+    )
+    update = jax.jit(learner.update)
+    first, losses = update(state, segment, keys[4])
+    assert int(first.replay.size) == 13 == int(first.replay.cursor)
+    live = np.asarray(weight).reshape(-1) > 0
+    np.testing.assert_array_equal(
+        np.asarray(first.replay.data.obs[:13]), np.asarray(segment.obs).reshape(-1, 3)[live]
+    )
+    assert float(first.replay.data.terminated[:13].sum()) == 1.0
+    same = jax.tree.map(lambda a, b: bool((a == b).all()), first.params, state.params)
+    assert all(jax.tree.leaves(same)) and float(losses["critic_loss"]) == 0.0  # 13 < 20
+    second, losses = update(first, segment, keys[4])  # 26 rows: it learns
+    assert int(second.replay.size) == 26 and float(losses["critic_loss"]) > 0
+    moved = jax.tree.map(lambda a, b: bool((a != b).any()), second.params, first.params)
+    assert all(jax.tree.leaves(moved["actor"])) and all(jax.tree.leaves(moved["target"]))
+
+
+def test_a_sac_run_resumes_bitwise_with_its_replay_memory(tmp_path):
+    from ldn_jax.config import from_preset
+    from ldn_jax.host.run_dir import read_config
+    from ldn_jax.host.training import Interrupted, train
+    from tests.test_resume import StopAfter, _lines
+
+    config = from_preset("paper", **SAC_RUN)
+    whole = train(config, tmp_path / "whole", checkpoint_every=1, quiet=True)
+    part = tmp_path / "part"
+    with pytest.raises(Interrupted):
+        train(config, part, checkpoint_every=1, quiet=True, stop=StopAfter(2))
+    resumed = train(read_config(part), part, checkpoint_every=1, quiet=True, resume=True)
+    assert _lines(part) == _lines(tmp_path / "whole") and resumed["resumes"] == 1
+    assert [r["eval_return"] for r in resumed["runs"]] == [r["eval_return"] for r in whole["runs"]]
+    first = _lines(part)[0]
+    assert {"real_critic_loss", "real_actor_loss", "real_alpha"} <= set(first["losses"])
+
+
+@pytest.mark.parametrize(
+    ("argv", "needle"),
+    [
+        (["--env", "cartpole-v1"], "sac is for continuous actions, and cartpole-v1's are discrete"),
+        (["--env", "hopper", "--set", "sac.utd=0"], "sac utd (updates per real step) must be >= 1"),
+        (["--env", "hopper", "--set", "schedule=episodes"], "it needs schedule 'steps'"),
+        (["--env", "hopper", "--stop", "ld"], "sac imagines none"),
+    ],
+)
+def test_bad_sac_settings_are_one_line(argv, needle):
+    from ldn_jax.host import flags
+    from ldn_jax.host.settings import UsageError
+
+    with pytest.raises(UsageError) as error:
+        flags.build_config(flags.parse_args(["--algo", "sac", *argv]))
+    assert needle in str(error.value) and "\n" not in str(error.value)

@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from ldn_jax.config import AgentConfig, ModelConfig, from_preset, validate
+from ldn_jax.config import AgentConfig, ModelConfig, StopConfig, from_preset, validate
 from ldn_jax.dynamics import Dynamics
 from ldn_jax.host import flags
 from ldn_jax.host.settings import UsageError
@@ -28,7 +28,10 @@ NEVER = lambda obs: jnp.zeros(obs.shape[:-1], bool)
 ENCODE = lambda a: jax.nn.one_hot(a, 2)
 
 
-def _play(config: ModelConfig, rule, workers=8, max_steps=50):
+NO_STOP = StopConfig()
+
+
+def _play(config: ModelConfig, rule, workers=8, max_steps=50, stop=NO_STOP):
     """Imagined episodes of `workers` workers in an untrained model that never predicts
     termination, under `rule`, with the rule's step limit."""
     dynamics = Dynamics(config, obs_size=4, action_size=2)
@@ -38,7 +41,7 @@ def _play(config: ModelConfig, rule, workers=8, max_steps=50):
     learner = A2C(AgentConfig(), obs_size=4, action_spec=2)
     world = model_world(dynamics, model, EnvFacts(NEVER, ENCODE), jnp.float32(1.0), rule)
     obs = jax.random.uniform(jax.random.key(2), (workers, 4), minval=-0.05, maxval=0.05)
-    limit = imagined_steps_limit(config, config.stop or "none", max_steps)
+    limit = imagined_steps_limit(stop, stop.rule or "none", max_steps)
     _, episodes = jax.jit(play_episodes, static_argnums=2)(
         jax.random.key(3), learner.init(jax.random.key(4)), Player(learner, world, limit), obs, None
     )
@@ -47,13 +50,13 @@ def _play(config: ModelConfig, rule, workers=8, max_steps=50):
 
 def test_a_fixed_horizon_stops_exactly_at_h_steps():
     for h in (1, 5, 25):
-        config = ModelConfig(stop="horizon", horizon=h)
-        _, _, episodes = _play(config, stop_rule(config, "horizon"))
+        stop = StopConfig(rule="horizon", horizon=h)
+        _, _, episodes = _play(ModelConfig(), stop_rule(stop, "horizon"), stop=stop)
         np.testing.assert_array_equal(np.asarray(episodes.lengths), h)
         done = np.asarray(episodes.steps.done)
         assert done[h - 1].all() and not np.asarray(episodes.steps.terminated).any()
-    assert imagined_steps_limit(ModelConfig(horizon=25), "horizon", 10) == 10  # the env's
-    assert imagined_steps_limit(ModelConfig(horizon=5), "ld", 200) == 200
+    assert imagined_steps_limit(StopConfig(horizon=25), "horizon", 10) == 10  # the env's
+    assert imagined_steps_limit(StopConfig(horizon=5), "ld", 200) == 200
 
 
 def test_the_m2ac_mask_keeps_the_stated_share_of_running_rollouts():
@@ -72,28 +75,29 @@ def test_the_m2ac_mask_keeps_the_stated_share_of_running_rollouts():
 
 
 def test_m2ac_rollouts_halve_each_step_in_a_world_of_disagreeing_members():
-    config = ModelConfig(ld="ensemble", stop="m2ac", m2ac_keep=0.5)
-    _, _, episodes = _play(config, stop_rule(config, "m2ac"), workers=16)
+    config = ModelConfig(ld="ensemble")
+    rule = stop_rule(StopConfig(rule="m2ac", m2ac_keep=0.5), "m2ac")
+    _, _, episodes = _play(config, rule, workers=16)
     running = np.asarray(episodes.steps.weight).sum(axis=1)
     np.testing.assert_array_equal(running[:6], [16, 8, 4, 2, 1, 0])
     assert running[6:].sum() == 0
 
 
 def test_the_oracle_never_stops_on_an_exact_model_and_stops_a_wrong_one_at_once():
-    config = ModelConfig(stop="oracle", oracle_error=0.01)
+    config, stop = ModelConfig(), StopConfig(rule="oracle", oracle_error=0.01)
     dynamics = Dynamics(config, obs_size=4, action_size=2)
     model = dynamics.init(jax.random.key(0))
     predict = lambda obs, action: dynamics.predict(model.params, obs, ENCODE(action))[0]
     exact = lambda key, obs, action: predict(obs, action)  # the "real env" is the model
-    _, _, episodes = _play(config, stop_rule(config, "oracle", exact))
+    _, _, episodes = _play(config, stop_rule(stop, "oracle", exact))
     np.testing.assert_array_equal(np.asarray(episodes.lengths), 50)  # the step limit only
     for offset, length in ((0.004, 50), (0.02, 1)):  # ||(c, c, c, c)|| = 2c against 0.01
         wrong = lambda key, obs, action, c=offset: predict(obs, action) + c
-        _, _, episodes = _play(config, stop_rule(config, "oracle", wrong))
+        _, _, episodes = _play(config, stop_rule(stop, "oracle", wrong))
         np.testing.assert_array_equal(np.asarray(episodes.lengths), length)
     assert float(oracle_error(jnp.zeros(4), jnp.full(4, 0.5))) == pytest.approx(1.0)
     with pytest.raises(ValueError, match="needs the real env"):
-        stop_rule(config, "oracle")
+        stop_rule(stop, "oracle")
 
 
 def test_the_oracle_steps_the_real_cartpole_from_imagined_states():
@@ -227,9 +231,9 @@ def test_each_rule_alone_builds_with_its_documented_defaults():
         assert len(config.k) == (3 if uses_k else 1)  # K matters to the LD draw only
     assert build("--stop", "m2ac").model.ld == "ensemble"  # M2AC ranks by disagreement
     assert build("--stop", "m2ac", "--ensemble-size", "3").model.ensemble == 3
-    assert build("--stop", "horizon", "--horizon", "25").model.horizon == 25
+    assert build("--stop", "horizon", "--horizon", "25").stop.horizon == 25
     assert from_preset("paper", algo="a2c").stop_rule is None
-    validate(from_preset("paper", algo="ldn", model={"stop": "oracle"}))
+    validate(from_preset("paper", algo="ldn", stop={"rule": "oracle"}))
 
 
 @pytest.mark.slow  # the paper smoke (test_paper) trains each rule too, in the default suite
@@ -240,7 +244,7 @@ def test_each_rule_trains_and_counts_its_imagined_steps(rule):
     config = validate(
         from_preset(
             "paper", env="cartpole-v1", algo="ldn", seeds=1, workers=8, episodes=16,
-            chunk_iterations=2, model={"stop": rule, "horizon": 3},
+            chunk_iterations=2, stop={"rule": rule, "horizon": 3},
         )
     )  # fmt: skip
     trainer = Trainer(config)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from ldn_jax.buffer import Transitions, buffer_add, buffer_init
-from ldn_jax.config import AgentConfig, ModelConfig, from_preset
+from ldn_jax.config import AgentConfig, ModelConfig, StopConfig, from_preset
 from ldn_jax.dynamics import MIN_WIDTH, Dynamics
 from ldn_jax.imagination import EnvFacts, model_world, stop_rule
 from ldn_jax.learners.a2c import A2C
@@ -231,7 +231,7 @@ def test_m0_is_bitwise_frozen_and_m1_moves(algo):
     assert all(moved)
     assert int(final.imagined_steps.min()) > 0
     config = trainer.config
-    if config.model.imagine == "memory":  # the PPO family: every imagined step went to I
+    if config.imagine.mode == "memory":  # the PPO family: every imagined step went to I
         assert config.algo.startswith("ppo")
         rows = config.agent.n_steps * config.workers
         np.testing.assert_array_equal(final.memory.count, final.imagined_steps % rows)
@@ -265,7 +265,7 @@ def test_observation_statistics_count_every_real_step_and_no_imagined_one():
 
 
 def test_imagined_batch_fills_a_whole_segment_with_back_to_back_episodes():
-    trainer = Trainer(_config(model={"imagine": "batch"}))
+    trainer = Trainer(_config(imagine={"mode": "batch"}))
     state = trainer.init_state(jax.random.key(0))  # M1 == M0: LD 0, every episode 1 step
     _, real = jax.jit(trainer.real_stage)(state, jax.random.key(2))
     imagine = jax.jit(trainer.imagine_stage)
@@ -342,4 +342,4 @@ def test_first_seed_starts_what_the_same_seeds_of_a_larger_batch_start():
 
 def _rule(ld_stop: bool):
     """The LD draw (ldn) or no stop (a2c-model)."""
-    return stop_rule(ModelConfig(), "ld" if ld_stop else "none")
+    return stop_rule(StopConfig(), "ld" if ld_stop else "none")

@@ -8,13 +8,13 @@ ensemble, `docs/training.md`), every rule that can end a branch, side by side wi
 learner alone at the same constants: no rule under fixed caps of 1, 5 and 15 steps, MBPO's
 horizon schedule, the LD draw (disagreement and predicted-variance readings) under a cap of
 15, M2AC's mask and MACURA's threshold under the same cap; and the cap of 5 with the
-policy's log std left to the real updates (`model.imagined_std` "real"), the elites' mean
+policy's log std left to the real updates (`imagine.std` "real"), the elites' mean
 as each imagined step (`model.imagined_step` "mean"), the real simulator stepped from the
 imagined states in the model's place (`model.world` "true": what a perfect model would give;
 "true-reward": its reward and termination only; "true-state": its states and termination
 only), eight times the model's fit steps, the model fitted to the critic's values too
-(`model.value_loss`), imagined rows that train the critic only (`model.imagined_updates`),
-branches from the newest real states only (`model.start_window`),
+(`model.value_loss`), imagined rows that train the critic only (`imagine.updates`),
+branches from the newest real states only (`imagine.start_window`),
 twice the imagined steps per real one, or 5 epochs on imagined rows, which are not rules.
 Per rule and env: IQM [95% interval] of the final moving return, of the training return over
 the last 10% of steps and of the greedy return after training, P(improvement) of the greedy

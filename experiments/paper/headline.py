@@ -68,7 +68,7 @@ def config_of(env: str, arm: str, seeds: int, first_seed: int, steps: int) -> Co
     """The arm's run: the `branched` preset as a user gets it, seeds `first_seed`.."""
     algo, model, double, _ = ARMS[arm]
     base = from_preset("branched", env=env, algo=algo, seeds=seeds, first_seed=first_seed)
-    agent = {"epochs": 2 * base.agent.epochs} if double else {}
+    agent = {"epochs": 2 * base.ppo.epochs} if double else {}
     return validate(
         from_preset(
             "branched",

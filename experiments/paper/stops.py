@@ -68,14 +68,14 @@ RULES = {
     "ld": ("ldn", {}, (), "LD draw, literal reading"),
     "ld-fig5": ("ldn", {"ld_reduce": "sum", "ld_scale": 10.0}, (), "LD draw, Figure 5 reading"),
     "ld-ensemble": ("ldn", {"ld": "ensemble"}, (), "LD draw, ensemble disagreement"),
-    "m2ac": ("a2c-model", {"stop": "m2ac"}, ("model.m2ac_keep", (0.5, 0.75, 0.9)), "M2AC mask"),
+    "m2ac": ("a2c-model", {"stop": "m2ac"}, ("stop.m2ac_keep", (0.5, 0.75, 0.9)), "M2AC mask"),
     "horizon-1": ("a2c-model", {"stop": "horizon", "horizon": 1}, (), "horizon h = 1"),
     "horizon-5": ("a2c-model", {"stop": "horizon", "horizon": 5}, (), "horizon h = 5"),
     "horizon-25": ("a2c-model", {"stop": "horizon", "horizon": 25}, (), "horizon h = 25"),
     "oracle": (
         "a2c-model",
         {"stop": "oracle"},
-        ("model.oracle_error", (0.005, 0.01, 0.02)),
+        ("stop.oracle_error", (0.005, 0.01, 0.02)),
         "oracle on the true error",
     ),
     "none": ("a2c-model", {}, (), "none (A3C-Model)"),
@@ -131,7 +131,7 @@ def dir_of(results: Path, scale: common.Scale, config: Config, name: str) -> Pat
     own_budget = config.steps != scale.mujoco_budgets.get(config.env, {}).get("steps")
     if config.env in common.MUJOCO and (config.seeds != scale.mujoco_seeds or own_budget):
         return results / "runs" / scale.name / f"stops-{config.env}-{name}"
-    if not config.sweep and config.model.stop is None and name in ("literal", "ld", "none"):
+    if not config.sweep and config.stop.rule is None and name in ("literal", "ld", "none"):
         return plain
     if name == "ld-ensemble":
         return plain

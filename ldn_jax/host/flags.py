@@ -29,6 +29,7 @@ from ldn_jax.config import (
     SCHEDULES,
     STOP_RULES,
     Config,
+    canonical,
     explain,
     fields,
     from_preset,
@@ -82,13 +83,13 @@ CONFIG_FLAGS = {
     "backend": "backend",
     "ld": "model.ld",
     "ensemble_size": "model.ensemble",
-    "imagine": "model.imagine",
+    "imagine": "imagine.mode",
     "support": "model.support",
-    "stop": "model.stop",
-    "horizon": "model.horizon",
-    "cut": "model.cut",
-    "m2ac_keep": "model.m2ac_keep",
-    "oracle_error": "model.oracle_error",
+    "stop": "stop.rule",
+    "horizon": "stop.horizon",
+    "cut": "imagine.cut",
+    "m2ac_keep": "stop.m2ac_keep",
+    "oracle_error": "stop.oracle_error",
     "action_encoding": "model.action_encoding",
 }
 """CLI flag (its argparse name) -> the config field it sets: short names for a few fields of
@@ -213,27 +214,27 @@ def parser() -> Parser:
         "--horizon",
         type=int,
         metavar="H",
-        help=f"--stop horizon: imagined steps per episode (default {m.horizon})",
+        help=f"--stop horizon: imagined steps per episode (default {d.stop.horizon})",
     )
     p.add_argument(
         "--cut",
         type=int,
         metavar="C",
         help="branches (--preset branched): a branch is cut after C steps, or sooner by --stop "
-        f"(default {m.cut}; the branched preset: 15 on halfcheetah and inverted_pendulum)",
+        f"(default {d.imagine.cut}; the branched preset: 15 on halfcheetah and inverted_pendulum)",
     )
     p.add_argument(
         "--m2ac-keep",
         type=float,
         metavar="Q",
-        help=f"--stop m2ac: share of running rollouts kept each step (default {m.m2ac_keep})",
+        help=f"--stop m2ac: share of running rollouts kept each step (default {d.stop.m2ac_keep})",
     )
     p.add_argument(
         "--oracle-error",
         type=float,
         metavar="E",
         help="--stop oracle: the largest true one-step error (L2, the observation's units) "
-        f"that goes on (default {m.oracle_error})",
+        f"that goes on (default {d.stop.oracle_error})",
     )
     p.add_argument(
         "--action-encoding",
@@ -367,11 +368,11 @@ def build_config(args: argparse.Namespace) -> Config:
     setting = lambda name: settings.get(name, (None,))[0]
     if args.ensemble_size is not None and "ensemble" not in (
         setting("model.ld"),
-        "ensemble" if setting("model.stop") == "m2ac" else None,
+        "ensemble" if setting("stop.rule") == "m2ac" else None,
     ):
         raise UsageError("--ensemble-size needs --ld ensemble (or --stop m2ac)")
     for flag, rule in (("horizon", "horizon"), ("m2ac_keep", "m2ac"), ("oracle_error", "oracle")):
-        if getattr(args, flag) is not None and setting("model.stop") != rule:
+        if getattr(args, flag) is not None and setting("stop.rule") != rule:
             hint = " (a branch's cut is --cut)" if flag == "horizon" else ""
             raise UsageError(f"{flag_name(flag)} needs --stop {rule}{hint}")
     overrides: dict = {}
@@ -382,8 +383,8 @@ def build_config(args: argparse.Namespace) -> Config:
         config = validate(from_preset(preset or Config.preset, **overrides))
     except ValueError as error:
         raise UsageError(str(error)) from None
-    if args.cut is not None and config.model.imagine_start != "real":
-        raise UsageError("--cut needs branches: --preset branched (or model.imagine_start real)")
+    if args.cut is not None and config.imagine.start != "real":
+        raise UsageError("--cut needs branches: --preset branched (or imagine.start real)")
     return resolve_physics(config)
 
 
@@ -401,7 +402,7 @@ def requested(args: argparse.Namespace) -> tuple[str | None, dict[str, tuple[obj
         given[name] = (value, f"{flag_name(flag)} {text}")
     for item in args.set:
         name, sep, text = item.partition("=")
-        name = name.strip()
+        name = canonical(name.strip())
         if not sep:
             raise UsageError(f"--set needs FIELD=VALUE, got {item!r}")
         if name in given:
@@ -427,6 +428,7 @@ def requested(args: argparse.Namespace) -> tuple[str | None, dict[str, tuple[obj
 def explain_field(args: argparse.Namespace, name: str) -> list[str]:
     """`--explain FIELD`: each layer that sets the field under these flags, lowest first,
     with its value; the last one is the run's."""
+    name = canonical(name)
     if name != "preset" and name not in fields():
         raise UsageError(f"--explain {name}: unknown config field (--list-fields names them)")
     preset, given = requested(args)

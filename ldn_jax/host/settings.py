@@ -18,7 +18,7 @@ import textwrap
 import tomllib
 from pathlib import Path
 
-from ldn_jax.config import PRESETS, SECTIONS, Config, FieldType, fields, get_field
+from ldn_jax.config import PRESETS, SECTIONS, Config, FieldType, canonical, fields, get_field
 
 
 class UsageError(Exception):
@@ -55,7 +55,7 @@ def read_config_file(path: str) -> tuple[str | None, dict[str, tuple[object, str
         if key in SECTIONS:
             if not isinstance(value, dict):
                 raise UsageError(f"--config {path}: {key} must be a table of its fields")
-            flat |= {f"{key}.{sub}": v for sub, v in value.items()}
+            flat |= {canonical(f"{key}.{sub}"): v for sub, v in value.items()}
         else:
             flat[key] = value
     where = f"--config {path}"
@@ -69,7 +69,7 @@ def parse_sweep(item: str) -> tuple[str, tuple[float, ...]]:
     """`--sweep FIELD=V1,V2,...` -> `(field, values)`; which fields may be swept is
     `validate`'s to say."""
     name, sep, text = item.partition("=")
-    name = name.strip()
+    name = canonical(name.strip())
     field_type(name, f"--sweep {item}")  # an unknown field: one line, the closest named
     try:
         values = tuple(float(v) for v in text.split(",") if v.strip())
@@ -87,6 +87,7 @@ def check_sweep(sweep, where: str) -> tuple[tuple[str, tuple[float, ...]], ...]:
     try:
         out = []
         for name, values in pairs:
+            name = canonical(name)
             field_type(name, where)
             if not all(_is(float, v) for v in values):
                 raise TypeError

@@ -7,7 +7,8 @@ the training loop calls it after each segment of n steps, real or imagined.
 from ldn_jax.learners.a2c import A2C
 from ldn_jax.learners.base import ActorCritic
 from ldn_jax.learners.ppo import PPO
+from ldn_jax.learners.sac import SACLearner
 
-LEARNERS: dict[str, type[ActorCritic]] = {"a2c": A2C, "ppo": PPO}
+LEARNERS: dict[str, type] = {"a2c": A2C, "ppo": PPO, "sac": SACLearner}
 
-__all__ = ["A2C", "LEARNERS", "PPO", "ActorCritic"]
+__all__ = ["A2C", "LEARNERS", "PPO", "ActorCritic", "SACLearner"]

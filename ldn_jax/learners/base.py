@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import copy
-import dataclasses
 
 import jax
 import jax.numpy as jnp
 import optax
 from flax import struct
 
-from ldn_jax.config import AgentConfig
+from ldn_jax.config import AgentConfig, Config
 from ldn_jax.networks import MLP
 
 Array = jax.Array
@@ -308,13 +307,14 @@ class ActorCritic:
         return learner
 
     def with_epochs(self, epochs: int) -> ActorCritic:
-        """This learner with `epochs` passes per update (0: its own); the optimiser and
-        everything else are shared."""
-        if epochs == 0 or epochs == self.config.epochs:
-            return self
-        learner = copy.copy(self)
-        learner.config = dataclasses.replace(self.config, epochs=epochs)
-        return learner
+        """This learner with `epochs` passes per update (0: its own); the A2C family makes
+        one update per segment, so it is this learner (`PPO.with_epochs`)."""
+        return self
+
+    @classmethod
+    def of(cls, config: Config, obs_size: int, action_spec) -> ActorCritic:
+        """This learner as a run's `config` makes it (its workers, its own section)."""
+        return cls(config.agent, obs_size, action_spec, config.workers)
 
     def apply_gradients(self, state: LearnerState, grads: dict) -> LearnerState:
         """One optimiser step from `grads`, frozen entries (`freezing`) left as they are and

@@ -8,6 +8,8 @@ LD stop) carry weight 0 into every loss and statistic, so they change nothing.
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import math
 
 import jax
@@ -16,7 +18,7 @@ import optax
 from flax import struct
 
 from ldn_jax import prng
-from ldn_jax.config import AgentConfig
+from ldn_jax.config import AgentConfig, Config, PPOConfig
 from ldn_jax.learners.base import (
     ActorCritic,
     LearnerState,
@@ -82,7 +84,7 @@ class Batch:
 @struct.dataclass
 class Memory:
     """The imaginary memory I (Algorithm 1, line 4): PPO rows waiting until a rollout's
-    worth exists (`ModelConfig.imagine = "memory"`)."""
+    worth exists (`ImagineConfig.mode = "memory"`)."""
 
     rows: Batch
     """`[n_steps * workers, ...]`; the first `count` are live, the rest weight 0."""
@@ -92,21 +94,42 @@ class Memory:
 class PPO(ActorCritic):
     """Clipped-objective PPO (PPO2) on each segment; Adam with global-norm clipping."""
 
-    def __init__(self, config: AgentConfig, obs_size: int, action_spec, workers: int = 1):
+    def __init__(
+        self,
+        config: AgentConfig,
+        obs_size: int,
+        action_spec,
+        workers: int = 1,
+        ppo: PPOConfig | None = None,
+    ):
+        """`ppo`: PPO's own constants (None: their defaults); the rest as `ActorCritic`'s."""
         super().__init__(config, obs_size, action_spec, workers)
+        self.ppo = ppo = ppo or PPOConfig()
 
         # Injected hyperparameters are arrays in the optimiser state, so a sweep can vary them.
         def adam(lr):
             return optax.inject_hyperparams(optax.adam)(learning_rate=lr, eps=config.adam_eps)
 
         self.optimizer = optax.chain(
-            optax.clip_by_global_norm(config.max_grad_norm),
+            optax.clip_by_global_norm(ppo.max_grad_norm),
             self.per_net(adam(config.actor_lr), adam(config.critic_lr)),
         )
 
+    @classmethod
+    def of(cls, config: Config, obs_size: int, action_spec) -> PPO:
+        return cls(config.agent, obs_size, action_spec, config.workers, config.ppo)
+
+    def with_epochs(self, epochs: int) -> PPO:
+        """This learner with `epochs` passes per update (0: its own); the optimiser and
+        everything else are shared."""
+        if epochs == 0 or epochs == self.ppo.epochs:
+            return self
+        learner = copy.copy(self)
+        learner.ppo = dataclasses.replace(self.ppo, epochs=epochs)
+        return learner
+
     def batch(self, params: dict, segment: Segment) -> Batch:
         """GAE and the old policy's quantities of a canonical segment, flattened to rows."""
-        cfg = self.config
         value = self.value(params, segment.obs)
         next_value = self.value(params, segment.next_obs)
         advantage = gae(
@@ -115,7 +138,7 @@ class PPO(ActorCritic):
             next_value,
             segment.terminated,
             segment.done,
-            (cfg.gamma, cfg.gae_lambda),
+            (self.config.gamma, self.ppo.gae_lambda),
         )
         log_prob, _ = self.log_prob_entropy(params, segment.obs, segment.action)
         rows = Batch(
@@ -146,23 +169,23 @@ class PPO(ActorCritic):
         # 0 x inf would turn every gradient into NaN.
         log_ratio = jnp.where(w > 0, log_prob - batch.log_prob, 0.0)
         ratio = jnp.exp(log_ratio)
-        actor_loss = -mean(clipped_surrogate(ratio, advantage, cfg.clip_eps))
+        actor_loss = -mean(clipped_surrogate(ratio, advantage, self.ppo.clip_eps))
 
         value = self.value(params, batch.obs)
         value_error = jnp.square(value - batch.target)
-        if cfg.value_clip is not None:
-            change = jnp.clip(value - batch.value, -cfg.value_clip, cfg.value_clip)
+        if self.ppo.value_clip is not None:
+            change = jnp.clip(value - batch.value, -self.ppo.value_clip, self.ppo.value_clip)
             value_error = jnp.maximum(value_error, jnp.square(batch.value + change - batch.target))
         critic_loss = 0.5 * mean(value_error)
         entropy_mean = mean(entropy)
-        total = actor_loss + cfg.value_coef * critic_loss - cfg.entropy_beta * entropy_mean
+        total = actor_loss + self.ppo.value_coef * critic_loss - cfg.entropy_beta * entropy_mean
         return total, {
             "actor_loss": actor_loss,
             "critic_loss": critic_loss,
             "entropy": entropy_mean,
             "approx_kl": jax.lax.stop_gradient(mean((ratio - 1.0) - log_ratio)),
             "clip_fraction": jax.lax.stop_gradient(
-                mean((jnp.abs(ratio - 1.0) > cfg.clip_eps).astype(jnp.float32))
+                mean((jnp.abs(ratio - 1.0) > self.ppo.clip_eps).astype(jnp.float32))
             ),
         }
 
@@ -178,7 +201,7 @@ class PPO(ActorCritic):
         the update leave the state as it is."""
         state, stopped = carry
         new, (info, live) = self.minibatch_step(state, batch)
-        stopped = stopped | (live & (info["approx_kl"] > 1.5 * self.config.target_kl))
+        stopped = stopped | (live & (info["approx_kl"] > 1.5 * self.ppo.target_kl))
         state = jax.tree.map(lambda a, b: jnp.where(stopped, b, a), new, state)
         return (state, stopped), ({**info, "kl_stopped": stopped.astype(jnp.float32)}, live)
 
@@ -197,7 +220,7 @@ class PPO(ActorCritic):
     def learn(self, state: LearnerState, batch: Batch, key: Array) -> tuple[LearnerState, dict]:
         """PPO's epochs over fixed rows. The row count is padded with weight-0 rows to a
         multiple of `minibatches`, so any count works."""
-        cfg = self.config
+        cfg = self.ppo
         rows = batch.weight.shape[0]
         size = math.ceil(rows / cfg.minibatches)
         pad = size * cfg.minibatches - rows

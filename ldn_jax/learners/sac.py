@@ -4,15 +4,15 @@ target entropy. Its updates read batches of transitions from a replay memory, ma
 step, all of them in one `lax.scan` (`SAC.learn`).
 
 The pure pieces (`squashed_sample`, `critic_loss`, `actor_loss`, `temperature_loss`,
-`polyak`) are tested against hand-computed values. Wiring the learner into the trainer's
-stages (a replay ring in the run's state, updates per real step) is the off-policy issue's
-next step; `SACConfig` becomes a config section then.
+`polyak`) are tested against hand-computed values. `SACLearner` puts SAC behind the
+trainer's learner protocol: its state carries the run's replay memory (a ring per run, so
+seeds vmap and a checkpoint holds it), and its `update` after each segment of real steps
+adds them to the memory and makes `utd` updates per step.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import flax.linen as nn
 import jax
@@ -20,32 +20,14 @@ import jax.numpy as jnp
 import optax
 from flax import struct
 
+from ldn_jax.buffer import Buffer, buffer_add, buffer_sample
+from ldn_jax.config import AgentConfig, Config, SACConfig
 from ldn_jax.networks import MLP
 
 Array = jax.Array
 
 LOG_STD_BOUNDS = (-20.0, 2.0)
 """The actor's log std is clipped into these (softlearning's, SBX's)."""
-
-
-@dataclass(frozen=True)
-class SACConfig:
-    """SAC's constants; the defaults are MBPO's and SBX's for MuJoCo."""
-
-    hidden: int = 256
-    """Units of each hidden layer of the actor and of each critic."""
-    layers: int = 2
-    """Hidden layers (ReLU)."""
-    lr: float = 3e-4
-    """Adam's learning rate of the actor, the critics and the temperature."""
-    gamma: float = 0.99
-    tau: float = 0.005
-    """Polyak step of the target critics after every critic update."""
-    batch_size: int = 256
-    target_entropy: float | None = None
-    """The entropy the temperature steers toward; None: minus the action dimension (MBPO's
-    configs use -3 on halfcheetah and -1 on hopper)."""
-    init_alpha: float = 1.0
 
 
 @struct.dataclass
@@ -134,8 +116,8 @@ class _Critic(nn.Module):
 class SAC:
     """SAC for `obs_size` observations and `actions` continuous actions in [-1, 1]."""
 
-    def __init__(self, config: SACConfig, obs_size: int, actions: int):
-        self.config = config
+    def __init__(self, config: SACConfig, obs_size: int, actions: int, gamma: float = 0.99):
+        self.config, self.gamma = config, gamma
         self.obs_size, self.actions = obs_size, actions
         self.actor = _Actor(config, actions)
         self.critic = _Critic(config)
@@ -175,14 +157,13 @@ class SAC:
         """The three losses of one batch, summed for one gradient (each reads only its own
         parameters: the others enter through `stop_gradient`)."""
         k_next, k_now = jax.random.split(key)
-        c = self.config
         alpha = jnp.exp(jax.lax.stop_gradient(params["log_alpha"]))
         next_action, next_log_prob = squashed_sample(
             *self.actor.apply(jax.lax.stop_gradient(params["actor"]), batch.next_obs), k_next
         )
         next_q = self.q(params["target"], batch.next_obs, next_action)
         q = self.q(params["critic"], batch.obs, batch.action)
-        critic = critic_loss(q, batch, next_q, next_log_prob, alpha, c.gamma)
+        critic = critic_loss(q, batch, next_q, next_log_prob, alpha, self.gamma)
         action, log_prob = squashed_sample(*self.actor.apply(params["actor"], batch.obs), k_now)
         frozen = jax.lax.stop_gradient(params["critic"])
         actor = actor_loss(alpha, log_prob, self.q(frozen, batch.obs, action))
@@ -216,3 +197,111 @@ class SAC:
 
         state, metrics = jax.lax.scan(step, state, jax.random.split(key, updates))
         return state, jax.tree.map(jnp.mean, metrics)
+
+
+@struct.dataclass
+class SACRun:
+    """`SACLearner`'s state in a run: SAC's and its replay memory."""
+
+    params: dict
+    opt_state: optax.OptState
+    replay: Buffer
+    """The run's real transitions (`Transitions` rows), a ring."""
+
+
+@struct.dataclass
+class SquashedActions:
+    """What the trainer reads of a policy's actions: continuous, `size` of them in [-1, 1]
+    (the env maps them onto its actuators)."""
+
+    size: int = struct.field(pytree_node=False)
+    discrete: bool = struct.field(pytree_node=False, default=False)
+
+    @property
+    def model_action_size(self) -> int:
+        return self.size
+
+    def env_action(self, action: Array) -> Array:
+        return jnp.clip(action, -1.0, 1.0)
+
+    def model_action(self, action: Array) -> Array:
+        return self.env_action(action)
+
+
+class SACLearner:
+    """SAC behind the learner protocol the rollout and the trainer call (`act`, `greedy`,
+    `observe`, `update` after each segment of n real steps x W workers)."""
+
+    def __init__(
+        self,
+        config: AgentConfig,
+        sac: SACConfig,
+        obs_size: int,
+        action_spec,
+        capacity: int,
+    ):
+        """`config`: its discount (`gamma`) and segment length (`n_steps`); `capacity`: the
+        replay memory's, in transitions."""
+        if getattr(action_spec, "discrete", True):
+            raise ValueError("sac is for continuous actions")
+        self.config, self.own, self.capacity = config, sac, capacity
+        self.policy = SquashedActions(action_spec.size)
+        self.sac = SAC(sac, obs_size, action_spec.size, gamma=config.gamma)
+        self.obs_size = obs_size
+
+    @classmethod
+    def of(cls, config: Config, obs_size: int, action_spec) -> SACLearner:
+        budget = config.steps or config.sac.buffer_capacity
+        capacity = min(config.sac.buffer_capacity, budget)
+        return cls(config.agent, config.sac, obs_size, action_spec, capacity)
+
+    def init(self, key: Array) -> SACRun:
+        zeros = lambda *shape: jnp.zeros((self.capacity, *shape), jnp.float32)
+        size = self.policy.size
+        rows = Transitions(
+            zeros(self.obs_size), zeros(size), zeros(), zeros(self.obs_size), zeros()
+        )
+        empty = Buffer(data=rows, size=jnp.zeros((), jnp.int32), cursor=jnp.zeros((), jnp.int32))
+        state = self.sac.init(key)
+        return SACRun(state.params, state.opt_state, empty)
+
+    def act(self, params: dict, key: Array, obs: Array) -> Array:
+        return self.sac.act(params, key, obs)
+
+    def greedy(self, params: dict, obs: Array) -> Array:
+        return self.sac.greedy(params, obs)
+
+    def env_action(self, action: Array) -> Array:
+        return self.policy.env_action(action)
+
+    def observe(self, state: SACRun, segment) -> SACRun:
+        return state
+
+    def update(self, state: SACRun, segment, key: Array) -> tuple[SACRun, dict]:
+        """Add the segment's live rows `[n, W]` to the replay memory, then make `utd` updates
+        per live row once the memory holds `learning_starts` (none before: the losses read
+        0 there)."""
+        flat = lambda x: x.reshape((-1, *x.shape[2:]))
+        rows = Transitions(
+            obs=flat(segment.obs),
+            action=flat(segment.action),
+            reward=flat(segment.reward),
+            next_obs=flat(segment.next_obs),
+            terminated=flat(segment.terminated).astype(jnp.float32),
+        )
+        live = flat(segment.weight) > 0
+        replay = buffer_add(state.replay, rows, live)
+        updates = self.own.utd * live.shape[0]
+        sample = lambda key: buffer_sample(replay, key, self.own.batch_size)
+        inner = SACState(state.params, state.opt_state)
+
+        def learn(inner):
+            return self.sac.learn(inner, sample, key, updates)
+
+        def wait(inner):
+            shapes = jax.eval_shape(learn, inner)[1]
+            return inner, jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), shapes)
+
+        ready = replay.size >= max(self.own.learning_starts, 1)
+        inner, losses = jax.lax.cond(ready, learn, wait, inner)
+        return SACRun(inner.params, inner.opt_state, replay), losses

@@ -40,6 +40,6 @@ def pick(config: Config) -> Stages:
     play = real.steps if config.schedule == "steps" else real.episodes
     if not config.algorithm.uses_model:
         return Stages(play, None)
-    if config.model.imagine_start == "real":
+    if config.imagine.start == "real":
         return Stages(play, branch.branches)
-    return Stages(play, imagine.memory if config.model.imagine == "memory" else imagine.episodes)
+    return Stages(play, imagine.memory if config.imagine.mode == "memory" else imagine.episodes)

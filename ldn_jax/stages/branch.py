@@ -1,7 +1,7 @@
-"""Branched imagination (`model.imagine_start` "real", ours, in the style of MBPO): `branches`
+"""Branched imagination (`imagine.start` "real", ours, in the style of MBPO): `branches`
 rollouts in M1 side by side, each from a state drawn from the real buffer R and cut after the
 `cut` (or sooner by the stop rule), the next drawn as one ends, until the iteration has
-imagined `imagined_ratio` steps per real step; the learner updates on every n steps of them,
+imagined `ratio` steps per real step; the learner updates on every n steps of them,
 with `real_share` of real rows beside. What those updates may move is `ImaginedUpdates`."""
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import jax
 import jax.numpy as jnp
 
 from ldn_jax.buffer import buffer_sample_recent
-from ldn_jax.config import Config, ModelConfig
+from ldn_jax.config import Config, ImagineConfig
 from ldn_jax.imagination import (
     first_step_statistic,
     ld_history,
@@ -34,7 +34,7 @@ POLICY = ("actor", "log_std")
 @dataclass(frozen=True)
 class ImaginedUpdates:
     """What the updates on imagined rows may move: the one place that decides it
-    (`model.imagined_updates`, `imagined_std`, `imagined_actor_step`, `imagined_epochs`)."""
+    (`imagine.updates`, `std`, `actor_step`, `epochs`)."""
 
     frozen: tuple[str, ...] = ()
     """Params entries whose gradients and steps are zero there (critic-only updates), so a
@@ -47,14 +47,14 @@ class ImaginedUpdates:
     """PPO's passes over imagined rows (0: the learner's own)."""
 
     @classmethod
-    def of(cls, config: ModelConfig) -> ImaginedUpdates:
-        critic_only = config.imagined_updates == "critic"
-        kept = POLICY if critic_only else ("log_std",) if config.imagined_std == "real" else ()
+    def of(cls, config: ImagineConfig) -> ImaginedUpdates:
+        critic_only = config.updates == "critic"
+        kept = POLICY if critic_only else ("log_std",) if config.std == "real" else ()
         return cls(
             frozen=POLICY if critic_only else (),
             kept=kept,
-            policy_step=config.imagined_actor_step,
-            epochs=config.imagined_epochs,
+            policy_step=config.actor_step,
+            epochs=config.epochs,
         )
 
     def learner(self, learner):
@@ -68,7 +68,7 @@ def branches(
     parts: Parts, state: TrainState, key: Array, gain: Array, real: RealPlay
 ) -> tuple[TrainState, Episodes]:
     """The iteration's branches and the learner's updates on them."""
-    config = parts.config.model
+    config = parts.config.imagine
     k_start, k_play, k_first = jax.random.split(key, 3)
     history = ld_history(parts.dynamics, config.branches)
     draw = lambda key: _draw(config, state, key)
@@ -81,7 +81,7 @@ def branches(
     played = real.episodes.lengths.sum()
     horizon = config.cut
     if rule == "mbpo":
-        horizon = scheduled_horizon(config, state.env_steps + played)
+        horizon = scheduled_horizon(parts.config.stop, state.env_steps + played)
     updates = ImaginedUpdates.of(config)
     player = Player(
         updates.learner(parts.learner),
@@ -94,22 +94,22 @@ def branches(
     batch = Batch(
         reset=lambda key: (draw(key), history),
         segments=segments(parts.config, parts.real.max_steps),
-        rows=jnp.ceil(config.imagined_ratio * played),
+        rows=jnp.ceil(config.ratio * played),
     )
     learner, imagined = play_batch(k_play, state.learner, player, (obs, history), batch)
     return state.replace(learner=learner), imagined
 
 
 def segments(config: Config, max_steps: int) -> int:
-    """The most segments a branched stage plays: enough for `imagined_ratio` imagined steps
+    """The most segments a branched stage plays: enough for `imagine.ratio` imagined steps
     per real step of the longest possible iteration."""
     n = config.agent.n_steps
     per_worker = config.steps_per_iteration if config.schedule == "steps" else max_steps
     real = per_worker * config.workers
-    return max(1, math.ceil(config.model.imagined_ratio * real / (config.model.branches * n)))
+    return max(1, math.ceil(config.imagine.ratio * real / (config.imagine.branches * n)))
 
 
-def _draw(config: ModelConfig, state: TrainState, key: Array) -> Array:
+def _draw(config: ImagineConfig, state: TrainState, key: Array) -> Array:
     """`branches` start states from R (from its newest `start_window` where set)."""
     buffer = state.buffer
     if config.start_window:
@@ -120,7 +120,7 @@ def _draw(config: ModelConfig, state: TrainState, key: Array) -> Array:
 
 def _macura_threshold(parts: Parts, state: TrainState, obs: Array, key: Array) -> Array:
     """MACURA's cut for this iteration, from the first imagined step of its starts `obs`."""
-    config = parts.config.model
+    config = parts.config.stop
     k_act, k_model = jax.random.split(key)
     learner = parts.learner
     action = learner.env_action(learner.act(state.learner.params, k_act, obs))
@@ -130,7 +130,7 @@ def _macura_threshold(parts: Parts, state: TrainState, obs: Array, key: Array) -
     return macura_threshold(first, config.macura_quantile, config.macura_scale)
 
 
-def _real_rows(config: ModelConfig, steps: Segment, lengths: Array):
+def _real_rows(config: ImagineConfig, steps: Segment, lengths: Array):
     """`Player.mix` for `real_share`: beside the `branches` imagined rollouts of each
     segment, R = round(branches x share / (1 - share)) windows of n real steps of this
     iteration (a worker and a start within its played steps, drawn at random); None for a

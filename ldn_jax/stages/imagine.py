@@ -1,6 +1,6 @@
 """Imagined episodes from the env's initial states (Algorithm 1, line 17), two stages by
 where their rows go: `episodes` (the learner updates on every n imagined steps, as on real
-ones; `model.imagine` "episodes" or "batch") and `memory` (the rows go to the imaginary
+ones; `imagine.mode` "episodes" or "batch") and `memory` (the rows go to the imaginary
 memory I, and PPO learns once a whole rollout's worth is there; "memory"). Also the model
 as a world (`world_of`), which the branches stage plays in too."""
 
@@ -21,7 +21,7 @@ from ldn_jax.stages.parts import Parts, RealPlay, TrainState
 Array = jax.Array
 
 IMAGINED_STARTS = 16
-"""Under `ModelConfig.imagine = "batch"`, imagined episodes start from a pool of this many
+"""Under `ImagineConfig.mode = "batch"`, imagined episodes start from a pool of this many
 fresh env starts per worker, drawn once per iteration (a MuJoCo reset is a call to the
 engine, too dear for every imagined step); each episode picks one at random."""
 
@@ -43,7 +43,7 @@ def world_of(
         true_reward=world in ("true", "true-reward"),
     )
     true_next = real.true_next if rule == "oracle" else None
-    stop = stop_rule(config.model, rule, true_next, threshold)
+    stop = stop_rule(config.stop, rule, true_next, threshold)
     return model_world(parts.dynamics, state.model, facts, gain, stop)
 
 
@@ -72,16 +72,16 @@ def memory(
 
 
 def _play(parts: Parts, state: TrainState, keys: tuple, gain: Array, real: RealPlay, learn: bool):
-    """One imagined episode per worker from a fresh start; or (`model.imagine` "batch", or
+    """One imagined episode per worker from a fresh start; or (`imagine.mode` "batch", or
     schedule "steps": worker w imagines `real.quota[w]` episodes, one per real episode it
     ended, within as many steps as it took real ones) episodes back to back from a pool of
     fresh starts."""
     config = parts.config
     k_reset, k_play = keys
-    quota = real.quota if config.model.imagine != "batch" else None
+    quota = real.quota if config.imagine.mode != "batch" else None
     history = ld_history(parts.dynamics, config.workers)  # the LD window's start
     batch = None
-    if config.model.imagine == "batch" or quota is not None:
+    if config.imagine.mode == "batch" or quota is not None:
         starts, _ = parts.real.reset(k_reset, IMAGINED_STARTS * config.workers)
         obs = starts[: config.workers]
         pick = lambda key: starts[jax.random.randint(key, obs.shape[:1], 0, len(starts))]
@@ -92,7 +92,7 @@ def _play(parts: Parts, state: TrainState, keys: tuple, gain: Array, real: RealP
     else:
         obs, _ = parts.real.reset(k_reset)
     world = world_of(parts, state, gain)
-    limit = imagined_steps_limit(config.model, config.stop_rule, parts.real.max_steps)
+    limit = imagined_steps_limit(config.stop, config.stop_rule, parts.real.max_steps)
     player = Player(parts.learner, world, limit, learn=learn)
     if batch is None:
         return play_episodes(k_play, state.learner, player, obs, history)

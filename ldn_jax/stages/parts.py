@@ -34,7 +34,7 @@ class TrainState:
     buffer: Buffer | None
     """Real transitions for fitting M1; None for model-free algorithms."""
     memory: Memory | None
-    """The imaginary memory I of `ModelConfig.imagine = "memory"` (PPO rows waiting for a
+    """The imaginary memory I of `ImagineConfig.mode = "memory"` (PPO rows waiting for a
     full batch); None otherwise."""
     workers: Workers | None
     """The real env's workers mid-episode (`Config.schedule = "steps"`); None otherwise."""
@@ -73,9 +73,7 @@ class Parts:
     def build(cls, config: Config, real: RealEnv | None = None) -> Parts:
         """The parts of `config`; `real` shares another's env (a sweep point's)."""
         real = real or RealEnv(config)
-        learner = LEARNERS[config.algorithm.learner](
-            config.agent, real.obs_size, real.action_spec, config.workers
-        )
+        learner = LEARNERS[config.algorithm.learner].of(config, real.obs_size, real.action_spec)
         encode, size = action_encoder(
             config.model.action_encoding, learner.policy, real.action_spec
         )
