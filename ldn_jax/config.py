@@ -80,6 +80,13 @@ class Algorithm:
     """Fit M1 on real transitions and train the agent on imagined episodes too."""
     ld_stop: bool
     """Stop imagined episodes by the learning-degree draw (MBRL-LDN)."""
+    own_stop: str = ""
+    """The stop rule where none is given (`StopConfig.rule` None): "ld" for an LD algorithm,
+    "none" for the other model-based ones, MBPO's schedule ("mbpo") for sac-model."""
+
+    @property
+    def stop(self) -> str:
+        return self.own_stop or ("ld" if self.ld_stop else "none")
 
 
 ALGORITHMS: dict[str, Algorithm] = {
@@ -91,6 +98,8 @@ ALGORITHMS: dict[str, Algorithm] = {
     "ppo-model": Algorithm("ppo", uses_model=True, ld_stop=False),
     "ppo-ldn": Algorithm("ppo", uses_model=True, ld_stop=True),
     "sac": Algorithm("sac", uses_model=False, ld_stop=False),
+    "sac-model": Algorithm("sac", uses_model=True, ld_stop=False, own_stop="mbpo"),
+    "sac-ldn": Algorithm("sac", uses_model=True, ld_stop=True),
 }
 
 THRESHOLDS = {"cartpole-v0": 150.0, "cartpole-v1": 150.0, "cartpole-v2": 100.0}
@@ -222,6 +231,10 @@ class SACConfig:
     """The entropy the temperature steers toward; None: minus the action dimension."""
     init_alpha: float = 1.0
     """The temperature at the start."""
+    model_retain: int = 4
+    """sac-model, sac-ldn: the model memory keeps the imagined rows of this many iterations'
+    branches (a ring of that many times the most one iteration imagines), MBPO's retention
+    (one epoch of 1,000 steps = 4 model fits of 250)."""
 
 
 @dataclass(frozen=True)
@@ -299,7 +312,13 @@ class ModelConfig:
     lr: float = 1e-3
     """Adam learning rate of M1."""
     updates: int = 100
-    """Minibatch gradient steps on M1 per iteration (the paper: 100 per episode)."""
+    """Minibatch gradient steps on M1 per iteration (the paper: 100 per episode); not read
+    under `early_stop`."""
+    early_stop: bool = False
+    """`probabilistic`: fit as MBPO does, toward convergence: epochs of one pass over R's
+    training slots, until no member's error on held-out transitions has fallen by 1% for 5
+    epochs in a row (at most 1,000), each member back at its best
+    (`Dynamics.fit_until_stalled`)."""
     value_loss: float = 0.0
     """Weight of a value-equivalence term in M1's fit (ours, for studies, in the style of
     value-aware model learning, Farahmand et al. 2017): the squared difference between the
@@ -569,7 +588,7 @@ class Config:
             return None
         if self.stop.rule is not None:
             return self.stop.rule
-        return "ld" if ALGORITHMS[self.algo].ld_stop else "none"
+        return ALGORITHMS[self.algo].stop
 
     @property
     def algorithm(self) -> Algorithm:
@@ -746,7 +765,7 @@ def resolution(preset: str, given: dict[str, tuple[object, str]]) -> list[Layer]
         merged |= values
     if "episodes" in given and "steps" not in given:
         found.append(("rule: a budget in episodes replaces the steps budget", {"steps": None}))
-    stop = merged["stop.rule"] or ("ld" if algorithm.ld_stop else "none")
+    stop = merged["stop.rule"] or algorithm.stop
     set_ld = any("model.ld" in values for _, values in found[1:])
     if stop in ENSEMBLE_RULES and not set_ld:
         found.append((f"rule: stop {stop} reads ensemble disagreement", {"model.ld": "ensemble"}))
@@ -1055,6 +1074,16 @@ def _sac_checks(config: Config) -> list[tuple[bool, str]]:
         ),
         (sac.init_alpha > 0, f"sac init_alpha must be > 0, got {sac.init_alpha}"),
         (
+            sac.model_retain >= 1,
+            "sac model_retain must be >= 1 (the model memory holds at least one iteration's "
+            f"branches), got {sac.model_retain}",
+        ),
+        (
+            learner != "sac" or not config.algorithm.uses_model or config.imagine.start == "real",
+            f"{config.algo} branches from real states (MBPO): use --preset branched (or "
+            "imagine.start real)",
+        ),
+        (
             learner != "sac" or _continuous(config.env),
             f"sac is for continuous actions, and {config.env}'s are discrete; use a2c or ppo",
         ),
@@ -1079,6 +1108,10 @@ def _model_checks(config: Config) -> list[tuple[bool, str]]:
             f"model value_loss must be >= 0, got {config.model.value_loss}",
         ),
         (config.model.batch_size >= 1, "model batch_size must be >= 1"),
+        (
+            not model.early_stop or model.probabilistic,
+            "model.early_stop fits a probabilistic ensemble: it needs model.probabilistic",
+        ),
         (config.model.buffer_capacity >= 1, "buffer_capacity must be >= 1"),
         (config.model.ensemble >= 2, f"ensemble size must be >= 2, got {config.model.ensemble}"),
         (model.hidden_layers >= 1, f"model hidden_layers must be >= 1, got {model.hidden_layers}"),
@@ -1263,9 +1296,11 @@ def _stop_checks(config: Config) -> list[tuple[bool, str]]:
         return [(False, f"unknown stop {stop!r}; valid: {', '.join(STOP_RULES)}")]
     algorithm = ALGORITHMS.get(config.algo)
     learner = algorithm.learner if algorithm else "a2c"
-    model_based = {"a2c": "a2c-model or ldn", "ppo": "ppo-model or ppo-ldn"}.get(
-        learner, "a model-based algorithm"
-    )
+    model_based = {
+        "a2c": "a2c-model or ldn",
+        "ppo": "ppo-model or ppo-ldn",
+        "sac": "sac-model or sac-ldn",
+    }[learner]
     return [
         (
             algorithm is None or algorithm.uses_model,
@@ -1278,8 +1313,7 @@ def _stop_checks(config: Config) -> list[tuple[bool, str]]:
         ),
         (
             algorithm is None or algorithm.ld_stop or stop != "ld",
-            f"{config.algo} with stop 'ld' is {'ldn' if learner == 'a2c' else 'ppo-ldn'}; "
-            f"use --algo {'ldn' if learner == 'a2c' else 'ppo-ldn'}",
+            f"{config.algo} with stop 'ld' is {_ldn(learner)}; use --algo {_ldn(learner)}",
         ),
         (
             stop not in ENSEMBLE_RULES or model.ld == "ensemble",
@@ -1302,6 +1336,11 @@ def _stop_checks(config: Config) -> list[tuple[bool, str]]:
             f"observation is not its whole state{OBSERVES_STATE}",
         ),
     ]
+
+
+def _ldn(learner: str) -> str:
+    """The algorithm whose imagination the LD draw stops, for `learner`."""
+    return "ldn" if learner == "a2c" else f"{learner}-ldn"
 
 
 OBSERVES_STATE = " (CartPole's, inverted_pendulum's, halfcheetah's, hopper's and walker2d's are)"

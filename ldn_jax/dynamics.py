@@ -16,7 +16,13 @@ import jax.numpy as jnp
 import optax
 from flax import struct
 
-from ldn_jax.buffer import Buffer, Transitions, buffer_sample, buffer_sample_split
+from ldn_jax.buffer import (
+    HOLDOUT_EVERY,
+    Buffer,
+    Transitions,
+    buffer_sample,
+    buffer_sample_split,
+)
 from ldn_jax.config import ModelConfig
 from ldn_jax.networks import DynamicsModel, GaussianDynamicsModel
 
@@ -358,9 +364,10 @@ class Dynamics:
     def fit_until_stalled(
         self, state: ModelState, buffer: Buffer, key: Array, stop: EarlyStop
     ) -> tuple[ModelState, Array, Array]:
-        """MBPO's fit of a probabilistic ensemble: epochs of `config.updates` steps on the
-        training slots, each member scored after every epoch by its squared error on
-        `HOLDOUT_BATCH` held-out transitions drawn once per fit. A member's parameters are
+        """MBPO's fit of a probabilistic ensemble: epochs of one pass over the training slots
+        (their count over the batch size, in minibatches drawn with replacement), each
+        member scored after every epoch by its squared error on `HOLDOUT_BATCH` held-out
+        transitions drawn once per fit. A member's parameters are
         kept as its best where its error falls by more than `stop.min_gain` of its best;
         the fit ends once no member has for more than `stop.patience` epochs in a row (or
         after `stop.max_epochs`), each member back at its best, the elites ranked on those
@@ -372,14 +379,23 @@ class Dynamics:
         scores = lambda params: jax.vmap(self.squared_error, (0, None, None))(
             params, held, state.stats
         )
-        fit = jax.vmap(self._fit_one, (0, 0, None, None, 0))
+        fit = jax.vmap(self._fit_one, (0, 0, None, None, 0, None, None))
         members = self.config.ensemble
+        # an epoch is a pass over the training slots (MBPO's), in minibatches
+        training = jnp.ceil(buffer.size * (1.0 - 1.0 / HOLDOUT_EVERY) / self.config.batch_size)
+        steps = jnp.maximum(training, 1.0).astype(jnp.int32)
 
         def epoch(carry):
             count, stalled, params, opt_state, best, best_error, _, key = carry
             key, k_fit = jax.random.split(key)
             params, opt_state, losses = fit(
-                params, opt_state, state.stats, buffer, jax.random.split(k_fit, members)
+                params,
+                opt_state,
+                state.stats,
+                buffer,
+                jax.random.split(k_fit, members),
+                None,
+                steps,
             )
             error = scores(params)
             gained = error < (1.0 - stop.min_gain) * best_error  # the first epoch: inf
@@ -421,9 +437,11 @@ class Dynamics:
         buffer: Buffer,
         key: Array,
         value: Callable[[Array], Array] | None = None,
+        steps: Array | None = None,
     ) -> tuple[dict, optax.OptState, Array]:
-        """One model's `config.updates` steps: its new params, Adam state and mean loss (eq.
-        2's or the NLL, without the value-equivalence term, which only its gradient takes)."""
+        """One model's `config.updates` steps (`steps`, a traced count, instead where given):
+        its new params, Adam state and mean loss (eq. 2's or the NLL, without the
+        value-equivalence term, which only its gradient takes)."""
 
         def update(carry, key: Array):
             params, opt_state = carry
@@ -436,6 +454,16 @@ class Dynamics:
             updates, opt_state = self.optimizer.update(grads, opt_state, params)
             return (optax.apply_updates(params, updates), opt_state), loss
 
+        if steps is not None:  # a pass of a length known only when it runs
+
+            def one(i, carry):
+                (params, opt_state), total = carry
+                carry, loss = update((params, opt_state), jax.random.fold_in(key, i))
+                return carry, total + loss
+
+            start = ((params, opt_state), jnp.zeros(()))
+            (params, opt_state), total = jax.lax.fori_loop(0, steps, one, start)
+            return params, opt_state, total / jnp.maximum(steps, 1)
         keys = jax.random.split(key, self.config.updates)
         (params, opt_state), losses = jax.lax.scan(update, (params, opt_state), keys)
         return params, opt_state, losses.mean() if self.config.updates else jnp.zeros(())

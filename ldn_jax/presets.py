@@ -186,9 +186,29 @@ PRESETS: dict[str, dict] = {
 """Each preset: fields by dotted name, with optional `"learners"` (learner -> fields) and
 `"envs"` (env -> fields) entries applied after it."""
 
-# hopper's, walker2d's and ant's PPO under the branched preset: one 256-step rollout per
-# iteration (`_MUJOCO_PPO`), the A2C family 100 steps.
-_ONE_MUJOCO_ROLLOUT = {"iteration_steps": 100, "learners": {"ppo": {"iteration_steps": 256}}}
+# The on-policy learners' iterations under the branched preset: the A2C family's 100 real steps
+# per worker, PPO's one rollout (hopper, walker2d, ant: 256 steps; halfcheetah: two of 64).
+_A2C_PPO = lambda ppo, **both: {
+    "a2c": {"iteration_steps": 100, **both},
+    "ppo": {"iteration_steps": ppo, **both},
+}
+
+# SAC's branches in MBPO's manner: a model fit every 250 real steps, until its held-out error
+# stalls; 400 rollouts side by side, 20 imagined steps per real one kept for 4 fits
+# (`sac.model_retain`), 5% real rows in each batch. sac-model's cut is MBPO's schedule
+# (hopper's by default: 1 step until 20k real steps, 15 from 100k; halfcheetah's and
+# walker2d's 1 throughout, ant's up to 25), sac-ldn's the LD draw under a cap of 15
+# (docs/logs/mbpo-reference.md).
+_MBPO = {
+    "iteration_steps": 250,
+    "imagine.branches": 400,
+    "imagine.ratio": 20.0,
+    "imagine.cut": 15,
+    "imagine.real_share": 0.05,
+    "model.early_stop": True,
+}
+_MBPO_FLAT = {"sac": {"stop.horizon_max": 1}}
+_MBPO_ANT = {"sac": {"stop.horizon_max": 25}}
 
 PRESETS["branched"] = {
     # Ours: imagination branched from real states in a probabilistic ensemble (docs/training.md,
@@ -210,25 +230,22 @@ PRESETS["branched"] = {
     "imagine.ratio": 4.0,
     "imagine.real_share": 0.05,
     "imagine.cut": 5,
+    "learners": {"sac": _MBPO},
     "envs": {
         # A model fit and an imagined batch every 8 workers x 100 real steps (halfcheetah's
         # PPO: x 128, two of its 64-step rollouts).
         # The pendulum's cut: 15 steps (docs/logs/imagination.md).
-        "inverted_pendulum": {"iteration_steps": 100, "imagine.cut": 15},
+        "inverted_pendulum": {"imagine.cut": 15, "learners": _A2C_PPO(100)},
         # halfcheetah's cut (ppo-ldn's cap): 15 (the measurements: docs/defaults.md, "The
         # branched preset").
-        "halfcheetah": {
-            "iteration_steps": 100,
-            "imagine.cut": 15,
-            "learners": {"ppo": {"iteration_steps": 128}},
-        },
-        # hopper's imagined rows train the critic only (docs/defaults.md, "The branched
-        # preset").
-        "hopper": {**_ONE_MUJOCO_ROLLOUT, "imagine.updates": "critic"},
-        "walker2d": _ONE_MUJOCO_ROLLOUT,
-        "ant": _ONE_MUJOCO_ROLLOUT,
-        "ant-nocfrc": _ONE_MUJOCO_ROLLOUT,
-        "reacher": {"iteration_steps": 100},
+        "halfcheetah": {"imagine.cut": 15, "learners": {**_A2C_PPO(128), **_MBPO_FLAT}},
+        # hopper's imagined rows train the on-policy critic only (docs/defaults.md, "The
+        # branched preset").
+        "hopper": {"learners": _A2C_PPO(256, **{"imagine.updates": "critic"})},
+        "walker2d": {"learners": {**_A2C_PPO(256), **_MBPO_FLAT}},
+        "ant": {"learners": {**_A2C_PPO(256), **_MBPO_ANT}},
+        "ant-nocfrc": {"learners": {**_A2C_PPO(256), **_MBPO_ANT}},
+        "reacher": {"learners": _A2C_PPO(100)},
     },
 }
 

@@ -177,7 +177,8 @@ class Trainer:
         }
         imagined_steps = jnp.zeros((), jnp.int32)
         if self.stages.imagine is not None:
-            state, metrics["model_loss"] = self.model_stage(state, real, k_model)
+            state, fitted = self.model_stage(state, real, k_model)
+            metrics.update(fitted)
             state, imagined_steps = self._imagine(state, k_imagine, gain, real, metrics)
         state = state.replace(
             moving_return=moving,

@@ -104,7 +104,7 @@ def test_the_replay_memory_takes_each_live_row_and_updates_start_at_learning_sta
     sac = {**SAC_RUN["sac"], "learning_starts": 20}
     config = from_preset("paper", **{**SAC_RUN, "steps": 1000, "sac": sac})
     learner = SACLearner.of(config, 3, ContinuousActions(2, (-1.0,) * 2, (1.0,) * 2))
-    assert learner.capacity == 1000  # the run's budget, below the memory's 1M
+    assert learner.memories.real == 1000  # the run's budget, below the memory's 1M
     state = learner.init(jax.random.key(0))
     keys = jax.random.split(jax.random.key(1), 5)
     n, w = 4, 5  # 20 rows, 13 of them live
@@ -168,3 +168,99 @@ def test_bad_sac_settings_are_one_line(argv, needle):
     with pytest.raises(UsageError) as error:
         flags.build_config(flags.parse_args(["--algo", "sac", *argv]))
     assert needle in str(error.value) and "\n" not in str(error.value)
+
+
+# -- sac-model and sac-ldn: MBPO's branches into a model memory --------------------------------
+
+MBPO_RUN = dict(env="hopper", algo="sac-model", seeds=1, steps=60, iteration_steps=20)
+MBPO_RUN["sac"] = {"learning_starts": 20, "hidden": 16, "batch_size": 20, "model_retain": 2}
+MBPO_RUN["imagine"] = {"branches": 6, "ratio": 2.0}
+MBPO_RUN["model"] = {"hidden": 16, "hidden_layers": 1, "early_stop": False, "updates": 2}
+
+
+def test_mbpo_branches_start_in_r_and_fill_a_model_memory_of_the_retained_iterations():
+    from ldn_jax.config import from_preset, validate
+    from ldn_jax.trainer import Trainer
+
+    config = validate(from_preset("branched", **MBPO_RUN))
+    trainer = Trainer(config)
+    learner = trainer.learner
+    # 2 imagined per real step: 40 rows an iteration, in whole segments of 6 branches x 1
+    # step (42), for 2 iterations
+    assert learner.memories.imagined == 2 * 42 and learner.memories.real_share == 0.05
+    state = jax.jit(trainer.init_state)(jax.random.key(0))
+    step = jax.jit(lambda s: trainer.iteration(s, jnp.float32(1.0)))
+    sizes = []
+    for _ in range(3):
+        state, _ = step(state)
+        sizes.append(int(state.learner.imagined.size))
+        memory, real = state.learner.imagined, state.buffer
+        starts = np.asarray(memory.data.obs[: memory.size])
+        stored = np.asarray(real.data.obs[: real.size])
+        # every imagined row's observation is a real one or an imagined successor; the
+        # first step of a branch starts in R: at least `branches` rows are states of R
+        in_r = (np.abs(starts[:, None, :] - stored[None, :, :]).max(-1) == 0).any(1)
+        assert in_r.sum() >= 6
+    # 2 iterations' rows kept: the third overwrites the first's (the cursor wrapped)
+    assert sizes == [42, 84, 84] and int(state.learner.imagined.cursor) == 126 % 84
+    assert int(state.learner.replay.size) == 60
+
+
+def test_a_batch_mixes_the_real_share_of_real_rows_once_the_model_memory_holds_some():
+    from ldn_jax.buffer import Buffer
+    from ldn_jax.config import SACConfig
+    from ldn_jax.envs.mujoco import ContinuousActions
+    from ldn_jax.learners.sac import Memories, SACLearner
+
+    actions = ContinuousActions(1, (-1.0,), (1.0,))
+    learner = SACLearner(
+        from_preset_agent(), SACConfig(batch_size=20), 1, actions, Memories(10, 10, 0.25)
+    )
+    state = learner.init(jax.random.key(0))
+    full = lambda value: jax.tree.map(lambda x: jnp.full_like(x, value), state.replay.data)
+    replay = Buffer(full(1.0), jnp.int32(10), jnp.int32(0))
+    empty = state.imagined
+    imagined = Buffer(full(-1.0), jnp.int32(10), jnp.int32(0))
+    alone = learner.sample(replay, empty, jax.random.key(1))
+    assert (np.asarray(alone.obs) == 1.0).all()  # nothing imagined yet: all real
+    mixed = learner.sample(replay, imagined, jax.random.key(1))
+    assert (np.asarray(mixed.obs) == 1.0).sum() == 5  # round(20 x 0.25)
+
+
+def from_preset_agent():
+    from ldn_jax.config import from_preset
+
+    return from_preset("paper", env="hopper", algo="sac").agent
+
+
+@pytest.mark.parametrize(
+    ("argv", "needle"),
+    [
+        (["--algo", "sac-model", "--env", "hopper"], "sac-model branches from real states"),
+        (
+            ["--algo", "sac-ldn", "--env", "hopper", "--preset", "branched",
+             "--set", "sac.model_retain=0"],
+            "sac model_retain must be >= 1",
+        ),
+        (["--algo", "sac-model", "--preset", "branched", "--env", "hopper", "--stop", "ld"],
+         "sac-model with stop 'ld' is sac-ldn"),
+    ],
+)  # fmt: skip
+def test_bad_mbpo_settings_are_one_line(argv, needle):
+    from ldn_jax.host import flags
+    from ldn_jax.host.settings import UsageError
+
+    with pytest.raises(UsageError) as error:
+        flags.build_config(flags.parse_args(argv))
+    assert needle in str(error.value) and "\n" not in str(error.value)
+
+
+def test_sac_model_runs_mbpos_schedule_and_sac_ldn_the_ld_draw():
+    from ldn_jax.config import from_preset
+
+    model = from_preset("branched", env="hopper", algo="sac-model")
+    ldn = from_preset("branched", env="halfcheetah", algo="sac-ldn")
+    assert model.stop_rule == "mbpo" and model.stop.horizon_max == 15
+    assert ldn.stop_rule == "ld" and ldn.imagine.cut == 15 and ldn.iteration_steps == 250
+    cheetah = from_preset("branched", env="halfcheetah", algo="sac-model")
+    assert cheetah.stop.horizon_max == 1 and cheetah.model.early_stop

@@ -181,9 +181,9 @@ def render(results: Path, scale: common.Scale) -> str:
     ]
     for section in (setup(data, scale), summary, *body):
         lines += render_section(section)
-    # The studies run on their own (experiments/paper/headline.py, locomotion.py, family.py and
-    # branched.py); the confirmatory one first.
-    for study in ("headline", "locomotion", "family", "branched"):
+    # The studies run on their own (experiments/paper/headline.py, sac.py, locomotion.py,
+    # family.py and branched.py); the confirmatory ones first.
+    for study in ("headline", "sac", "locomotion", "family", "branched"):
         text = results / study / f"{study}.md"
         if text.exists():
             lines += ["", text.read_text().strip(), ""]

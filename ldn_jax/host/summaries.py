@@ -16,7 +16,15 @@ from ldn_jax.host.plots import learning_curves
 from ldn_jax.host.run_dir import RunDir
 from ldn_jax.trainer import failure_names
 
-LOSS_SUFFIXES = ("_loss", "_entropy", "_approx_kl", "_clip_fraction", "_kl_stopped", "_alpha")
+LOSS_SUFFIXES = (
+    "_loss",
+    "_entropy",
+    "_approx_kl",
+    "_clip_fraction",
+    "_kl_stopped",
+    "_alpha",
+    "_epochs",
+)
 """Metrics written under "losses" in metrics.jsonl."""
 
 

@@ -207,6 +207,22 @@ class SACRun:
     opt_state: optax.OptState
     replay: Buffer
     """The run's real transitions (`Transitions` rows), a ring."""
+    imagined: Buffer | None = None
+    """sac-model, sac-ldn: the rows of the model's branches (MBPO's model buffer), a ring of
+    `Memories.imagined` rows; None for sac."""
+
+
+@struct.dataclass
+class Memories:
+    """The sizes of `SACLearner`'s memories and how a batch mixes them."""
+
+    real: int = struct.field(pytree_node=False)
+    """Real transitions kept (the run's budget at most)."""
+    imagined: int = struct.field(pytree_node=False, default=0)
+    """Imagined rows kept (0: no model memory)."""
+    real_share: float = struct.field(pytree_node=False, default=1.0)
+    """With a model memory holding rows: the share of each batch drawn from the real one
+    (MBPO's 5%), the rest from the model's."""
 
 
 @struct.dataclass
@@ -233,18 +249,12 @@ class SACLearner:
     `observe`, `update` after each segment of n real steps x W workers)."""
 
     def __init__(
-        self,
-        config: AgentConfig,
-        sac: SACConfig,
-        obs_size: int,
-        action_spec,
-        capacity: int,
+        self, config: AgentConfig, sac: SACConfig, obs_size: int, action_spec, memories: Memories
     ):
-        """`config`: its discount (`gamma`) and segment length (`n_steps`); `capacity`: the
-        replay memory's, in transitions."""
+        """`config`: its discount (`gamma`) and segment length (`n_steps`)."""
         if getattr(action_spec, "discrete", True):
             raise ValueError("sac is for continuous actions")
-        self.config, self.own, self.capacity = config, sac, capacity
+        self.config, self.own, self.memories = config, sac, memories
         self.policy = SquashedActions(action_spec.size)
         self.sac = SAC(sac, obs_size, action_spec.size, gamma=config.gamma)
         self.obs_size = obs_size
@@ -252,18 +262,24 @@ class SACLearner:
     @classmethod
     def of(cls, config: Config, obs_size: int, action_spec) -> SACLearner:
         budget = config.steps or config.sac.buffer_capacity
-        capacity = min(config.sac.buffer_capacity, budget)
-        return cls(config.agent, config.sac, obs_size, action_spec, capacity)
+        memories = Memories(real=min(config.sac.buffer_capacity, budget))
+        if config.algorithm.uses_model:
+            from ldn_jax.stages.branch import most_rows  # the stages build on the learners
+
+            imagined = config.sac.model_retain * most_rows(config, config.episode_limit)
+            memories = Memories(memories.real, imagined, config.imagine.real_share)
+        return cls(config.agent, config.sac, obs_size, action_spec, memories)
+
+    def _empty(self, capacity: int) -> Buffer:
+        zeros = lambda *shape: jnp.zeros((capacity, *shape), jnp.float32)
+        obs, size = self.obs_size, self.policy.size
+        rows = Transitions(zeros(obs), zeros(size), zeros(), zeros(obs), zeros())
+        return Buffer(data=rows, size=jnp.zeros((), jnp.int32), cursor=jnp.zeros((), jnp.int32))
 
     def init(self, key: Array) -> SACRun:
-        zeros = lambda *shape: jnp.zeros((self.capacity, *shape), jnp.float32)
-        size = self.policy.size
-        rows = Transitions(
-            zeros(self.obs_size), zeros(size), zeros(), zeros(self.obs_size), zeros()
-        )
-        empty = Buffer(data=rows, size=jnp.zeros((), jnp.int32), cursor=jnp.zeros((), jnp.int32))
         state = self.sac.init(key)
-        return SACRun(state.params, state.opt_state, empty)
+        imagined = self._empty(self.memories.imagined) if self.memories.imagined else None
+        return SACRun(state.params, state.opt_state, self._empty(self.memories.real), imagined)
 
     def act(self, params: dict, key: Array, obs: Array) -> Array:
         return self.sac.act(params, key, obs)
@@ -280,19 +296,10 @@ class SACLearner:
     def update(self, state: SACRun, segment, key: Array) -> tuple[SACRun, dict]:
         """Add the segment's live rows `[n, W]` to the replay memory, then make `utd` updates
         per live row once the memory holds `learning_starts` (none before: the losses read
-        0 there)."""
-        flat = lambda x: x.reshape((-1, *x.shape[2:]))
-        rows = Transitions(
-            obs=flat(segment.obs),
-            action=flat(segment.action),
-            reward=flat(segment.reward),
-            next_obs=flat(segment.next_obs),
-            terminated=flat(segment.terminated).astype(jnp.float32),
-        )
-        live = flat(segment.weight) > 0
-        replay = buffer_add(state.replay, rows, live)
-        updates = self.own.utd * live.shape[0]
-        sample = lambda key: buffer_sample(replay, key, self.own.batch_size)
+        0 there), each on a batch drawn by `sample`."""
+        replay = _add(state.replay, segment)
+        updates = self.own.utd * segment.weight.size
+        sample = lambda key: self.sample(replay, state.imagined, key)
         inner = SACState(state.params, state.opt_state)
 
         def learn(inner):
@@ -304,4 +311,37 @@ class SACLearner:
 
         ready = replay.size >= max(self.own.learning_starts, 1)
         inner, losses = jax.lax.cond(ready, learn, wait, inner)
-        return SACRun(inner.params, inner.opt_state, replay), losses
+        return state.replace(params=inner.params, opt_state=inner.opt_state, replay=replay), losses
+
+    def sample(self, replay: Buffer, imagined: Buffer | None, key: Array) -> Transitions:
+        """One batch: from the replay memory alone, or, once the model memory holds rows,
+        `real_share` of it real (rounded) and the rest imagined (MBPO's mix)."""
+        size = self.own.batch_size
+        k_all, k_real, k_model = jax.random.split(key, 3)
+        alone = buffer_sample(replay, k_all, size)
+        if imagined is None:
+            return alone
+        real = round(size * self.memories.real_share)
+        mixed = jax.tree.map(
+            lambda a, b: jnp.concatenate([a, b]),
+            buffer_sample(replay, k_real, real),
+            buffer_sample(imagined, k_model, size - real),
+        )
+        return jax.tree.map(lambda m, a: jnp.where(imagined.size > 0, m, a), mixed, alone)
+
+    def remember(self, state: SACRun, steps) -> SACRun:
+        """The live rows of imagined `steps` `[T, W]` into the model memory."""
+        return state.replace(imagined=_add(state.imagined, steps))
+
+
+def _add(memory: Buffer, steps) -> Buffer:
+    """The live rows (weight > 0) of `steps` `[T, W]` appended to `memory`."""
+    flat = lambda x: x.reshape((-1, *x.shape[2:]))
+    rows = Transitions(
+        obs=flat(steps.obs),
+        action=flat(steps.action),
+        reward=flat(steps.reward),
+        next_obs=flat(steps.next_obs),
+        terminated=flat(steps.terminated).astype(jnp.float32),
+    )
+    return buffer_add(memory, rows, flat(steps.weight) > 0)

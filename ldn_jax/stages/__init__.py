@@ -5,7 +5,8 @@ that reads only the config section it uses:
 - the model's fit: `model.fit`;
 - imagination, by where it starts and where its rows go: `imagine.episodes` (from initial
   states, learnt from as played: the paper), `imagine.memory` (the same, into PPO's
-  imaginary memory) or `branch.branches` (short rollouts from real states);
+  imaginary memory), `branch.branches` (short rollouts from real states, learnt from as
+  played) or `branch.remembered` (the same, into an off-policy learner's model memory);
 - the failure guard: `guard.guarded`.
 
 `ldn_jax.trainer.Trainer` picks them once, when it is built (`pick`); `Parts` holds what they
@@ -41,5 +42,6 @@ def pick(config: Config) -> Stages:
     if not config.algorithm.uses_model:
         return Stages(play, None)
     if config.imagine.start == "real":
-        return Stages(play, branch.branches)
+        off_policy = config.algorithm.learner == "sac"
+        return Stages(play, branch.remembered if off_policy else branch.branches)
     return Stages(play, imagine.memory if config.imagine.mode == "memory" else imagine.episodes)

@@ -6,7 +6,9 @@ with `real_share` of real rows beside. What those updates may move is `ImaginedU
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import jax
@@ -64,12 +66,24 @@ class ImaginedUpdates:
         )
 
 
-def branches(
-    parts: Parts, state: TrainState, key: Array, gain: Array, real: RealPlay
-) -> tuple[TrainState, Episodes]:
-    """The iteration's branches and the learner's updates on them."""
+@dataclass(frozen=True)
+class Branching:
+    """One iteration's branches before anyone plays them: what both branch stages share."""
+
+    start: tuple
+    """`(obs, history)`: the first rollouts' start states, drawn from R."""
+    world: Callable
+    """M1 as the world, stopped by the run's rule."""
+    horizon: Array | int
+    """The cut: `cut`, or MBPO's scheduled horizon."""
+    batch: Batch
+
+
+def branching(parts: Parts, state: TrainState, keys: tuple, gain: Array, real: RealPlay):
+    """The iteration's `Branching`: starts from R, the world, the cut and the row quota;
+    `keys`: the starts' and the macura threshold's."""
     config = parts.config.imagine
-    k_start, k_play, k_first = jax.random.split(key, 3)
+    k_start, k_first = keys
     history = ld_history(parts.dynamics, config.branches)
     draw = lambda key: _draw(config, state, key)
     obs = draw(k_start)
@@ -77,27 +91,54 @@ def branches(
     threshold = None
     if rule == "macura":  # from the first step of this iteration's starts
         threshold = _macura_threshold(parts, state, obs, k_first)
-    world = world_of(parts, state, gain, threshold)
     played = real.episodes.lengths.sum()
     horizon = config.cut
     if rule == "mbpo":
         horizon = scheduled_horizon(parts.config.stop, state.env_steps + played)
-    updates = ImaginedUpdates.of(config)
-    player = Player(
-        updates.learner(parts.learner),
-        world,
-        parts.real.max_steps,
-        horizon=horizon,
-        keep=updates.kept,
-        mix=_real_rows(config, real.episodes.steps, real.episodes.lengths),
-    )
     batch = Batch(
         reset=lambda key: (draw(key), history),
         segments=segments(parts.config, parts.real.max_steps),
         rows=jnp.ceil(config.ratio * played),
     )
-    learner, imagined = play_batch(k_play, state.learner, player, (obs, history), batch)
+    return Branching((obs, history), world_of(parts, state, gain, threshold), horizon, batch)
+
+
+def branches(
+    parts: Parts, state: TrainState, key: Array, gain: Array, real: RealPlay
+) -> tuple[TrainState, Episodes]:
+    """The iteration's branches and the on-policy learner's updates on them."""
+    k_start, k_play, k_first = jax.random.split(key, 3)
+    plan = branching(parts, state, (k_start, k_first), gain, real)
+    updates = ImaginedUpdates.of(parts.config.imagine)
+    player = Player(
+        updates.learner(parts.learner),
+        plan.world,
+        parts.real.max_steps,
+        horizon=plan.horizon,
+        keep=updates.kept,
+        mix=_real_rows(parts.config.imagine, real.episodes.steps, real.episodes.lengths),
+    )
+    learner, imagined = play_batch(k_play, state.learner, player, plan.start, plan.batch)
     return state.replace(learner=learner), imagined
+
+
+def remembered(
+    parts: Parts, state: TrainState, key: Array, gain: Array, real: RealPlay
+) -> tuple[TrainState, Episodes]:
+    """MBPO's rollouts for an off-policy learner: the iteration's branches played by the
+    current policy, no update on them here; their rows go to the learner's model memory
+    (`SACLearner.remember`), which its updates during the next real play draw from."""
+    k_start, k_play, k_first = jax.random.split(key, 3)
+    plan = branching(parts, state, (k_start, k_first), gain, real)
+    player = Player(parts.learner, plan.world, parts.real.max_steps, horizon=plan.horizon)
+    player = dataclasses.replace(player, learn=False)
+    _, imagined = play_batch(k_play, state.learner, player, plan.start, plan.batch)
+    return state.replace(learner=parts.learner.remember(state.learner, imagined.steps)), imagined
+
+
+def most_rows(config: Config, max_steps: int) -> int:
+    """The most imagined rows one branched stage plays (its segments x branches x n)."""
+    return segments(config, max_steps) * config.imagine.branches * config.agent.n_steps
 
 
 def segments(config: Config, max_steps: int) -> int:

@@ -5,15 +5,17 @@ from __future__ import annotations
 import jax
 
 from ldn_jax.buffer import Transitions, buffer_add
+from ldn_jax.dynamics import EarlyStop
 from ldn_jax.rollout import Episodes
 from ldn_jax.stages.parts import Parts, TrainState
 
 Array = jax.Array
 
 
-def fit(parts: Parts, state: TrainState, real: Episodes, key: Array) -> tuple[TrainState, Array]:
+def fit(parts: Parts, state: TrainState, real: Episodes, key: Array) -> tuple[TrainState, dict]:
     """The iteration's real steps (`[T, W, ...]`, those of weight > 0) into R, and
-    `model.updates` minibatch steps of M1 on R; the fit's loss."""
+    `model.updates` minibatch steps of M1 on R (`model.early_stop`: MBPO's fit toward
+    convergence); the fit's metrics: `model_loss` (and `model_epochs` under early_stop)."""
     steps = real.steps
     flat = lambda x: x.reshape((-1, *x.shape[2:]))
     batch = Transitions(
@@ -26,5 +28,11 @@ def fit(parts: Parts, state: TrainState, real: Episodes, key: Array) -> tuple[Tr
     value = None
     if parts.config.model.value_loss:
         value = lambda obs: parts.learner.value(state.learner.params, obs)
-    model, loss = parts.dynamics.fit(state.model, buffer, key, value)
-    return state.replace(model=model, buffer=buffer), loss
+    if parts.config.model.early_stop:
+        stop = EarlyStop()
+        model, loss, epochs = parts.dynamics.fit_until_stalled(state.model, buffer, key, stop)
+        fitted = {"model_loss": loss, "model_epochs": epochs.astype(loss.dtype)}
+    else:
+        model, loss = parts.dynamics.fit(state.model, buffer, key, value)
+        fitted = {"model_loss": loss}
+    return state.replace(model=model, buffer=buffer), fitted
