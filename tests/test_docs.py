@@ -121,6 +121,25 @@ def test_the_readme_headline_rows_have_a_record_per_arm():
     assert set(headline.ARMS) >= {p.stem.split("-s10")[0].split("-", 1)[1] for p in scored}
 
 
+def test_the_readme_sac_rows_have_a_record_per_scored_run():
+    """A README row that quotes the sac study names its records folder; every run the study
+    has replayed in gymnasium has its committed record, and the per-run files are not
+    git-ignored."""
+    rows = [cells for cells in _readme_results() if "records/sac" in cells[-1]]
+    assert rows
+    scored = sorted((ROOT / "experiments/results/sac/arms").glob("*.json"))
+    assert scored
+    if (ROOT / ".git").exists() and shutil.which("git"):
+        ignored = subprocess.run(
+            ["git", "check-ignore", "-q", str(scored[0])], cwd=ROOT, check=False
+        ).returncode
+        assert ignored == 1, f"{scored[0]} is git-ignored"
+    for file in scored:
+        if "gymnasium" in file.read_text():
+            record = ROOT / "experiments/results/records/sac" / file.stem
+            assert (record / "summary.json").is_file(), file.name
+
+
 def _words(text: str) -> set[str]:
     return set(re.findall(r"[\w-]+", text))
 

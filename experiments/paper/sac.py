@@ -6,7 +6,7 @@ steps, halfcheetah and hopper at 200,000, seeds 5-9 (confirmatory) and 0-4 (expl
 
 Trains every run (one vmapped program of 5 seeds per task; resumed when interrupted, reused
 when finished; the records under `records/sac/`), then replays each seed's greedy policy in
-gymnasium (10 episodes, `ldn-jax eval`'s) into `sac/runs/TASK-sS.json` (committed, with the
+gymnasium (10 episodes, `ldn-jax eval`'s) into `sac/arms/TASK-sS.json` (committed, with the
 commits that trained it); `--report` rebuilds `sac/sac.json` and `sac/sac.md` from them.
 """
 
@@ -49,7 +49,7 @@ def ensure(task: str, first_seed: int, results: Path, code: str) -> None:
     """Train (or resume, or reuse) one task's run, then replay it in gymnasium."""
     config = config_of(task, first_seed)
     out = run_dir(results, task, first_seed)
-    file = common.out_dir(results, "sac/runs") / f"{out.name}.json"
+    file = common.out_dir(results, "sac/arms") / f"{out.name}.json"
     kept = json.loads(file.read_text()) if file.exists() else {}
     commits = kept.get("commits", [])
     if not cache.has_finished(out) and code not in commits:
@@ -78,7 +78,7 @@ def ensure(task: str, first_seed: int, results: Path, code: str) -> None:
 
 def report(results: Path) -> None:
     rows = []
-    for file in sorted((results / "sac" / "runs").glob("*.json")):
+    for file in sorted((results / "sac" / "arms").glob("*.json")):
         data = json.loads(file.read_text())
         if "gymnasium" not in data:
             continue
