@@ -379,7 +379,7 @@ class Dynamics:
         scores = lambda params: jax.vmap(self.squared_error, (0, None, None))(
             params, held, state.stats
         )
-        fit = jax.vmap(self._fit_one, (0, 0, None, None, 0, None, None))
+        fit = jax.vmap(self._pass, (0, 0, None, None, 0, None))
         members = self.config.ensemble
         # an epoch is a pass over the training slots (MBPO's), in minibatches
         training = jnp.ceil(buffer.size * (1.0 - 1.0 / HOLDOUT_EVERY) / self.config.batch_size)
@@ -394,7 +394,6 @@ class Dynamics:
                 state.stats,
                 buffer,
                 jax.random.split(k_fit, members),
-                None,
                 steps,
             )
             error = scores(params)
@@ -437,11 +436,40 @@ class Dynamics:
         buffer: Buffer,
         key: Array,
         value: Callable[[Array], Array] | None = None,
-        steps: Array | None = None,
     ) -> tuple[dict, optax.OptState, Array]:
-        """One model's `config.updates` steps (`steps`, a traced count, instead where given):
-        its new params, Adam state and mean loss (eq. 2's or the NLL, without the
-        value-equivalence term, which only its gradient takes)."""
+        """One model's `config.updates` steps: its new params, Adam state and mean loss (eq.
+        2's or the NLL, without the value-equivalence term, which only its gradient takes)."""
+        update = self._step(stats, buffer, value)
+        keys = jax.random.split(key, self.config.updates)
+        (params, opt_state), losses = jax.lax.scan(update, (params, opt_state), keys)
+        return params, opt_state, losses.mean() if self.config.updates else jnp.zeros(())
+
+    def _pass(
+        self,
+        params: dict,
+        opt_state: optax.OptState,
+        stats: Normalizer,
+        buffer: Buffer,
+        key: Array,
+        steps: Array,
+    ) -> tuple[dict, optax.OptState, Array]:
+        """One model's `steps` steps, a count known only when it runs (an epoch of
+        `fit_until_stalled`): as `_fit_one`."""
+        update = self._step(stats, buffer, None)
+
+        def one(i, carry):
+            (params, opt_state), total = carry
+            carry, loss = update((params, opt_state), jax.random.fold_in(key, i))
+            return carry, total + loss
+
+        start = ((params, opt_state), jnp.zeros(()))
+        (params, opt_state), total = jax.lax.fori_loop(0, steps, one, start)
+        return params, opt_state, total / jnp.maximum(steps, 1)
+
+    def _step(self, stats: Normalizer, buffer: Buffer, value: Callable | None) -> Callable:
+        """`update((params, opt_state), key) -> ((params, opt_state), loss)`: one Adam step
+        of one model on a minibatch drawn from `buffer` (from its training slots where the
+        held-out ones rank the members)."""
 
         def update(carry, key: Array):
             params, opt_state = carry
@@ -454,16 +482,4 @@ class Dynamics:
             updates, opt_state = self.optimizer.update(grads, opt_state, params)
             return (optax.apply_updates(params, updates), opt_state), loss
 
-        if steps is not None:  # a pass of a length known only when it runs
-
-            def one(i, carry):
-                (params, opt_state), total = carry
-                carry, loss = update((params, opt_state), jax.random.fold_in(key, i))
-                return carry, total + loss
-
-            start = ((params, opt_state), jnp.zeros(()))
-            (params, opt_state), total = jax.lax.fori_loop(0, steps, one, start)
-            return params, opt_state, total / jnp.maximum(steps, 1)
-        keys = jax.random.split(key, self.config.updates)
-        (params, opt_state), losses = jax.lax.scan(update, (params, opt_state), keys)
-        return params, opt_state, losses.mean() if self.config.updates else jnp.zeros(())
+        return update

@@ -89,8 +89,7 @@ _LOCOMOTION = {
 }
 
 # SB3 zoo's HalfCheetah PPO in our options, with PyTorch's fan-in initialiser as SB3 has it
-# (docs/defaults.md: at 200k steps the zoo's constants beat our locomotion defaults' greedy
-# eval on 5 of 5 seeds, and the fan-in initialiser lifted every seed's to >= 2,966).
+# (the measurements that chose them: docs/defaults.md, "Locomotion tasks").
 _ZOO_HALFCHEETAH_PPO = {
     "agent.hidden_layers": 2,
     "agent.actor_hidden": 256,
@@ -137,7 +136,8 @@ _HOPPING = {**_LOCOMOTION, "ppo": _MUJOCO_PPO}
 _LONG = {"steps": 1_000_000, "chunk_iterations": 1}
 
 TASKS: dict[str, dict[str, object]] = {
-    # 5 seeds of a2c, ldn and the PPO family passed 900 within 600k steps.
+    # The budget within which the A2C and PPO families learn it (docs/defaults.md,
+    # "Continuous control").
     "inverted_pendulum": {"steps": 600_000, "chunk_iterations": 1},
     "halfcheetah": {
         **_LONG,
@@ -145,7 +145,8 @@ TASKS: dict[str, dict[str, object]] = {
     },
     "hopper": {**_LONG, "learners": _HOPPING},
     "walker2d": {**_LONG, "learners": _HOPPING},
-    # No support box: every imagined episode left it within 1-6 steps in 105 dimensions.
+    # No support box: in 105 dimensions imagined episodes leave it at once (docs/defaults.md,
+    # "Continuous control").
     "ant": {**_LONG, "learners": _HOPPING, "model.support": None},
     "ant-nocfrc": {**_LONG, "learners": _HOPPING, "model.support": None},
     "reacher": _LONG,
