@@ -248,7 +248,7 @@ BAD_INPUT = [
     (["--steps", "1e6"], "argument --steps: invalid int value: '1e6'"),
     (["--steps", "1000", "--episodes", "10"], "give --steps or --episodes, not both"),
     (["--workers", "0"], "workers must be >= 1, got 0"),
-    (["--algo", "ldn", "--imagine", "memory"], "imagine 'memory' needs the PPO learner"),
+    (["--algo", "ldn", "--imagine", "memory"], "imagine.mode 'memory' needs the PPO learner"),
     (["--imagine", "all"], "argument --imagine: invalid choice: 'all'"),
     (["--support", "-0.1"], "model support must be >= 0 and finite"),
     (["--support", "inf"], "model support must be >= 0 and finite"),
