@@ -301,6 +301,11 @@ def main() -> None:
         type=lambda text: tuple(int(v) for v in text.split(",")),
         help="section mjx: the vmapped seed counts (default 10,100,1000; --quick 1)",
     )
+    parser.add_argument(
+        "--sac-seeds",
+        type=int,
+        help="section sac: the vmapped seeds (default 5; --quick 1)",
+    )
     parser.add_argument("--probe", metavar="CACHE", help=argparse.SUPPRESS)
     parser.add_argument("--probe-shape", default="10x3", help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -348,6 +353,8 @@ def main() -> None:
         result["branched_stages"] = stages.branched_stages(**size)
     if "sac" in sections:
         size = dict(seeds=1, steps=1000) if args.quick else {}
+        if args.sac_seeds:
+            size["seeds"] = args.sac_seeds
         result["sac"] = sac_costs(**size)
     if "sweep" in sections:
         size = dict(seeds=2, episodes=40) if args.quick else {}

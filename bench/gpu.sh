@@ -8,7 +8,8 @@
 # own timeout (MJX_S, SEEDS_S seconds) and write their own file, so a slow one loses only its
 # own row. About 9 minutes on an H200 (2026-12-04).
 #
-#   bash bench/gpu.sh OUTDIR   # writes OUTDIR/gpu_mjx_N.json, gpu_seeds.json, gpu.log, nvidia-smi.txt
+#   bash bench/gpu.sh OUTDIR   # writes OUTDIR/gpu_mjx_N.json, gpu_seeds.json, gpu_sac.json,
+#                              # gpu.log, nvidia-smi.txt
 #
 # It needs a python with JAX's CUDA plugin, flax and optax (PYTHON, default python3); it runs
 # from the checkout (PYTHONPATH), so nothing of ours is installed. MuJoCo and MJX, where that
@@ -40,5 +41,9 @@ for seeds in 10 100 1000; do
 done
 PYTHONUNBUFFERED=1 timeout "${SEEDS_S:-150}" "$python" -m bench.bench --sections seeds \
     --out "$out/gpu_seeds.json" >>"$out/gpu.log" 2>&1 || status=$?
+# SAC's update at 10 seeds (bare, in its scan, per real step through MJX): the projected wall
+# clock of 200k steps at UTD 20.
+PYTHONUNBUFFERED=1 timeout "${SAC_S:-150}" "$python" -m bench.bench --sections sac \
+    --sac-seeds 10 --out "$out/gpu_sac.json" >>"$out/gpu.log" 2>&1 || status=$?
 ls "$out"
 exit "$status"
