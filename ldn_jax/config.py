@@ -627,6 +627,19 @@ class Config:
         n = self.agent.n_steps
         return math.ceil(self.episode_limit / n) * n
 
+    def branch_segments(self, max_steps: int) -> int:
+        """The most segments a branched stage plays: enough for `imagine.ratio` imagined
+        steps per real step of the longest possible iteration (`max_steps`: the episode
+        limit, one iteration's real steps per worker under schedule "episodes")."""
+        n = self.agent.n_steps
+        per_worker = self.steps_per_iteration if self.schedule == "steps" else max_steps
+        real = per_worker * self.workers
+        return max(1, math.ceil(self.imagine.ratio * real / (self.imagine.branches * n)))
+
+    def branch_rows(self, max_steps: int) -> int:
+        """The most imagined rows one branched stage plays (its segments x branches x n)."""
+        return self.branch_segments(max_steps) * self.imagine.branches * self.agent.n_steps
+
     @property
     def episode_limit(self) -> int:
         """The episode step limit this run plays with (`max_steps`, or the env's)."""

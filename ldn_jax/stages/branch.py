@@ -7,7 +7,6 @@ with `real_share` of real rows beside. What those updates may move is `ImaginedU
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -15,7 +14,7 @@ import jax
 import jax.numpy as jnp
 
 from ldn_jax.buffer import buffer_sample_recent
-from ldn_jax.config import Config, ImagineConfig
+from ldn_jax.config import ImagineConfig
 from ldn_jax.imagination import (
     first_step_statistic,
     ld_history,
@@ -97,7 +96,7 @@ def branching(parts: Parts, state: TrainState, keys: tuple, gain: Array, real: R
         horizon = scheduled_horizon(parts.config.stop, state.env_steps + played)
     batch = Batch(
         reset=lambda key: (draw(key), history),
-        segments=segments(parts.config, parts.real.max_steps),
+        segments=parts.config.branch_segments(parts.real.max_steps),
         rows=jnp.ceil(config.ratio * played),
     )
     return Branching((obs, history), world_of(parts, state, gain, threshold), horizon, batch)
@@ -134,20 +133,6 @@ def remembered(
     player = dataclasses.replace(player, learn=False)
     _, imagined = play_batch(k_play, state.learner, player, plan.start, plan.batch)
     return state.replace(learner=parts.learner.remember(state.learner, imagined.steps)), imagined
-
-
-def most_rows(config: Config, max_steps: int) -> int:
-    """The most imagined rows one branched stage plays (its segments x branches x n)."""
-    return segments(config, max_steps) * config.imagine.branches * config.agent.n_steps
-
-
-def segments(config: Config, max_steps: int) -> int:
-    """The most segments a branched stage plays: enough for `imagine.ratio` imagined steps
-    per real step of the longest possible iteration."""
-    n = config.agent.n_steps
-    per_worker = config.steps_per_iteration if config.schedule == "steps" else max_steps
-    real = per_worker * config.workers
-    return max(1, math.ceil(config.imagine.ratio * real / (config.imagine.branches * n)))
 
 
 def _draw(config: ImagineConfig, state: TrainState, key: Array) -> Array:
