@@ -219,7 +219,7 @@ def test_a_batch_mixes_the_real_share_of_real_rows_once_the_model_memory_holds_s
     state = learner.init(jax.random.key(0))
     full = lambda value: jax.tree.map(lambda x: jnp.full_like(x, value), state.replay.data)
     replay = Buffer(full(1.0), jnp.int32(10), jnp.int32(0))
-    empty = state.imagined
+    empty = state.imagined  # the model memory as a run starts: no rows
     imagined = Buffer(full(-1.0), jnp.int32(10), jnp.int32(0))
     alone = learner.sample(replay, empty, jax.random.key(1))
     assert (np.asarray(alone.obs) == 1.0).all()  # nothing imagined yet: all real

@@ -207,9 +207,16 @@ class SACRun:
     opt_state: optax.OptState
     replay: Buffer
     """The run's real transitions (`Transitions` rows), a ring."""
-    imagined: Buffer | None = None
-    """sac-model, sac-ldn: the rows of the model's branches (MBPO's model buffer), a ring of
-    `Memories.imagined` rows; None for sac."""
+
+
+@struct.dataclass
+class MBPORun(SACRun):
+    """sac-model's and sac-ldn's: `SACRun` and the model memory (a run of `sac` keeps the
+    shorter state, and so the layout its checkpoints were written in)."""
+
+    imagined: Buffer
+    """The rows of the model's branches (MBPO's model buffer), a ring of `Memories.imagined`
+    rows."""
 
 
 @struct.dataclass
@@ -276,8 +283,10 @@ class SACLearner:
 
     def init(self, key: Array) -> SACRun:
         state = self.sac.init(key)
-        imagined = self._empty(self.memories.imagined) if self.memories.imagined else None
-        return SACRun(state.params, state.opt_state, self._empty(self.memories.real), imagined)
+        replay = self._empty(self.memories.real)
+        if not self.memories.imagined:
+            return SACRun(state.params, state.opt_state, replay)
+        return MBPORun(state.params, state.opt_state, replay, self._empty(self.memories.imagined))
 
     def act(self, params: dict, key: Array, obs: Array) -> Array:
         return self.sac.act(params, key, obs)
@@ -297,7 +306,7 @@ class SACLearner:
         0 there), each on a batch drawn by `sample`."""
         replay = _add(state.replay, segment)
         updates = self.own.utd * segment.weight.size
-        sample = lambda key: self.sample(replay, state.imagined, key)
+        sample = lambda key: self.sample(replay, getattr(state, "imagined", None), key)
         inner = SACState(state.params, state.opt_state)
 
         def learn(inner):
@@ -315,10 +324,10 @@ class SACLearner:
         """One batch: from the replay memory alone, or, once the model memory holds rows,
         `real_share` of it real (rounded) and the rest imagined (MBPO's mix)."""
         size = self.own.batch_size
+        if imagined is None:
+            return buffer_sample(replay, key, size)
         k_all, k_real, k_model = jax.random.split(key, 3)
         alone = buffer_sample(replay, k_all, size)
-        if imagined is None:
-            return alone
         real = round(size * self.memories.real_share)
         mixed = jax.tree.map(
             lambda a, b: jnp.concatenate([a, b]),
@@ -327,7 +336,7 @@ class SACLearner:
         )
         return jax.tree.map(lambda m, a: jnp.where(imagined.size > 0, m, a), mixed, alone)
 
-    def remember(self, state: SACRun, steps) -> SACRun:
+    def remember(self, state: MBPORun, steps) -> MBPORun:
         """The live rows of imagined `steps` `[T, W]` into the model memory."""
         return state.replace(imagined=_add(state.imagined, steps))
 
