@@ -100,15 +100,14 @@ def test_every_readme_result_names_its_record_and_commit():
             assert all(_is_commit(c) for c in commits.groups() if c), record
 
 
-def test_the_readme_headline_rows_have_a_record_per_arm():
-    """A README row that quotes the headline study names its records folder, and every arm the
-    study has scored there has its committed record."""
-    from experiments.paper import headline
-
-    rows = [cells for cells in _readme_results() if "records/headline" in cells[-1]]
+def _study_files_with_records(study: str) -> list[Path]:
+    """A study that a README row quotes: the row names `records/STUDY`, its per-run files in
+    `experiments/results/STUDY/arms` are committed (not git-ignored), and every run replayed
+    in gymnasium there has its committed record. Returns those files."""
+    rows = [cells for cells in _readme_results() if f"records/{study}" in cells[-1]]
     assert rows
-    scored = sorted((ROOT / "experiments/results/headline/arms").glob("*.json"))
-    assert scored  # the study's per-arm files are committed, not ignored
+    scored = sorted((ROOT / "experiments/results" / study / "arms").glob("*.json"))
+    assert scored  # the study's per-run files are committed, not ignored
     if (ROOT / ".git").exists() and shutil.which("git"):
         ignored = subprocess.run(
             ["git", "check-ignore", "-q", str(scored[0])], cwd=ROOT, check=False
@@ -116,28 +115,20 @@ def test_the_readme_headline_rows_have_a_record_per_arm():
         assert ignored == 1, f"{scored[0]} is git-ignored"
     for file in scored:
         if "gymnasium" in file.read_text():
-            record = ROOT / "experiments/results/records/headline" / file.stem
+            record = ROOT / "experiments/results/records" / study / file.stem
             assert (record / "summary.json").is_file(), file.name
+    return scored
+
+
+def test_the_readme_headline_rows_have_a_record_per_arm():
+    from experiments.paper import headline
+
+    scored = _study_files_with_records("headline")
     assert set(headline.ARMS) >= {p.stem.split("-s10")[0].split("-", 1)[1] for p in scored}
 
 
 def test_the_readme_sac_rows_have_a_record_per_scored_run():
-    """A README row that quotes the sac study names its records folder; every run the study
-    has replayed in gymnasium has its committed record, and the per-run files are not
-    git-ignored."""
-    rows = [cells for cells in _readme_results() if "records/sac" in cells[-1]]
-    assert rows
-    scored = sorted((ROOT / "experiments/results/sac/arms").glob("*.json"))
-    assert scored
-    if (ROOT / ".git").exists() and shutil.which("git"):
-        ignored = subprocess.run(
-            ["git", "check-ignore", "-q", str(scored[0])], cwd=ROOT, check=False
-        ).returncode
-        assert ignored == 1, f"{scored[0]} is git-ignored"
-    for file in scored:
-        if "gymnasium" in file.read_text():
-            record = ROOT / "experiments/results/records/sac" / file.stem
-            assert (record / "summary.json").is_file(), file.name
+    _study_files_with_records("sac")
 
 
 def _words(text: str) -> set[str]:
