@@ -142,7 +142,9 @@ class AgentConfig:
     """How actor and critic weights start, one of `INITS`: "normal", a normal of `init_std`
     in every layer (the tutorial code's); "fan_in", uniform in +-1/sqrt(fan_in), PyTorch's
     default for a linear layer's weights, biases at zero; "torch", PyTorch's default in full,
-    biases uniform in +-1/sqrt(fan_in) too (SB3's PPO without its orthogonal init)."""
+    biases uniform in +-1/sqrt(fan_in) too (SB3's PPO without its orthogonal init);
+    "orthogonal", SB3's own: orthogonal weights of gain sqrt(2) in the hidden layers, 0.01 in
+    the actor's output and 1 in the critic's, biases at zero."""
     normalize_obs: bool = False
     """Actor and critic see observations standardised by the running mean and variance of
     the real observations seen so far, clipped to +-`obs_clip` standard deviations, as SB3's
@@ -176,6 +178,31 @@ class AgentConfig:
     """The learner trains on the env's reward times this (after `terminal_reward`), so the
     critic's targets stay near 1 where returns run to thousands. Reported returns are the
     environment's own."""
+
+
+@dataclass(frozen=True)
+class A2CConfig:
+    """The A2C family's own constants (a2c, a2c-model, ldn). The defaults are the paper's
+    (A3C as its tutorial code runs it in TensorFlow 1); the other values are SB3's A2C, which
+    rl-baselines3-zoo runs on MuJoCo."""
+
+    gae_lambda: float = 1.0
+    """Lambda of generalised advantage estimation; 1: the n-step return (A3C, the paper;
+    SB3's A2C too)."""
+    value_coef: float = 1.0
+    """Weight of the value loss in the one loss (the paper: 1; SB3: 0.5). Under the per-net
+    RMSProp steps it matters only through `max_grad_norm`."""
+    max_grad_norm: float | None = None
+    """None: no clip (the paper); a number: the gradients of actor and critic together are
+    clipped to this global norm before the RMSProp step (SB3: 0.5)."""
+    rmsprop: str = "tf1"
+    """One of `RMSPROPS`. "tf1": TensorFlow 1's RMSProp, the paper's code (`agent.rmsprop_eps`
+    inside the square root, the average of squared gradients starting at one); "torch":
+    PyTorch's, SB3's (eps added to the root, the average starting at zero)."""
+
+
+RMSPROPS = ("tf1", "torch")
+"""The RMSProp variants of the A2C family (`A2CConfig.rmsprop`)."""
 
 
 @dataclass(frozen=True)
@@ -550,6 +577,7 @@ class Config:
     of `SWEEPABLE`): every combination of the values, for every K, is one point of the
     vmapped program (`points`), so a sweep compiles once. Empty: no sweep."""
     agent: AgentConfig = field(default_factory=AgentConfig)
+    a2c: A2CConfig = field(default_factory=A2CConfig)
     ppo: PPOConfig = field(default_factory=PPOConfig)
     sac: SACConfig = field(default_factory=SACConfig)
     model: ModelConfig = field(default_factory=ModelConfig)
@@ -703,6 +731,7 @@ from_preset = Config.from_preset
 
 SECTIONS = {
     "agent": AgentConfig,
+    "a2c": A2CConfig,
     "ppo": PPOConfig,
     "sac": SACConfig,
     "model": ModelConfig,
@@ -1053,6 +1082,16 @@ def _agent_checks(config: Config) -> list[tuple[bool, str]]:
         (config.agent.activation in ACTIVATIONS, f"activation must be one of {ACTIVATIONS}"),
         (config.agent.init in INITS, f"init must be one of {', '.join(INITS)}"),
         (0 <= config.ppo.gae_lambda <= 1, "gae_lambda must be in [0, 1]"),
+        (0 <= config.a2c.gae_lambda <= 1, "a2c gae_lambda must be in [0, 1]"),
+        (config.a2c.value_coef >= 0, f"a2c value_coef must be >= 0, got {config.a2c.value_coef}"),
+        (
+            config.a2c.max_grad_norm is None or config.a2c.max_grad_norm > 0,
+            "a2c max_grad_norm must be > 0 (or None: no clip)",
+        ),
+        (
+            config.a2c.rmsprop in RMSPROPS,
+            f"a2c rmsprop must be one of {', '.join(RMSPROPS)}, got {config.a2c.rmsprop!r}",
+        ),
         (config.ppo.clip_eps > 0, "clip_eps must be > 0"),
         (
             config.ppo.value_clip is None or config.ppo.value_clip > 0,

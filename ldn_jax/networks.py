@@ -34,15 +34,18 @@ def normal_init(std: float):
     return init
 
 
-INITS = ("normal", "fan_in", "torch")
+INITS = ("normal", "fan_in", "torch", "orthogonal")
 """Initialisers of the actor-critic's MLPs (`AgentConfig.init`)."""
 
 
-def kernel_init(init: str, std: float):
+def kernel_init(init: str, std: float, gain: float = 2**0.5):
     """ "normal": `normal_init(std)`; "fan_in" and "torch": uniform in +-1/sqrt(fan_in)
-    (PyTorch's `nn.Linear` default, kaiming-uniform with a = sqrt(5))."""
+    (PyTorch's `nn.Linear` default, kaiming-uniform with a = sqrt(5)); "orthogonal": an
+    orthogonal matrix times `gain` (SB3's actor-critics: sqrt(2) in the hidden layers)."""
     if init in ("fan_in", "torch"):
         return _uniform(lambda shape: shape[0])
+    if init == "orthogonal":
+        return nn.initializers.orthogonal(gain)
     return normal_init(std)
 
 
@@ -119,19 +122,21 @@ class MLP(nn.Module):
     layers: int = 1
     weight_init: str = "normal"
     """One of `INITS`."""
+    out_gain: float = 1.0
+    """Under "orthogonal": the output layer's gain (SB3: 0.01 for the policy, 1 for the
+    value)."""
 
     @nn.compact
     def __call__(self, x: Array) -> Array:
-        init = kernel_init(self.weight_init, self.init_std)
-        dense = lambda size: nn.Dense(  # called on the current `x`: its width is the fan-in
+        dense = lambda size, gain: nn.Dense(  # called on the current `x`: its width is the fan-in
             size,
-            kernel_init=init,
+            kernel_init=kernel_init(self.weight_init, self.init_std, gain),
             bias_init=bias_init(self.weight_init, x.shape[-1]),
             dot_general=dense_dot_general,
         )
         for _ in range(self.layers):
-            x = ACTIVATIONS[self.activation](dense(self.hidden)(x))
-        return dense(self.out)(x)
+            x = ACTIVATIONS[self.activation](dense(self.hidden, 2**0.5)(x))
+        return dense(self.out, self.out_gain)(x)
 
 
 class DynamicsModel(nn.Module):

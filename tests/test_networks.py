@@ -77,3 +77,18 @@ def test_the_initialisers_give_their_spread_and_the_same_weights_under_jit(weigh
             np.testing.assert_allclose(layer["bias"].std(), fan_in**-0.5 / np.sqrt(3), rtol=0.5)
         else:
             assert not np.any(layer["bias"])
+
+
+def test_the_orthogonal_initialiser_gives_orthogonal_layers_of_their_gains():
+    net = MLP(64, 6, "tanh", 0.1, layers=2, weight_init="orthogonal", out_gain=0.01)
+    params = net.init(jax.random.key(0), jnp.zeros((1, 17)))
+    jitted = jax.jit(lambda key: net.init(key, jnp.zeros((1, 17))))(jax.random.key(0))
+    for a, b in zip(jax.tree.leaves(params), jax.tree.leaves(jitted), strict=True):
+        np.testing.assert_array_equal(a, b)
+    layers = list(params["params"].values())
+    for layer, gain in zip(layers, (2**0.5, 2**0.5, 0.01), strict=True):
+        kernel = np.asarray(layer["kernel"], np.float64)
+        narrow = min(kernel.shape)  # the narrow side's vectors are orthonormal, times the gain
+        gram = kernel.T @ kernel if kernel.shape[0] >= kernel.shape[1] else kernel @ kernel.T
+        np.testing.assert_allclose(gram, gain**2 * np.eye(narrow), atol=1e-5 * max(gain**2, 1))
+        assert not np.any(layer["bias"])

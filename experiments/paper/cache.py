@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import json
 import shutil
+import subprocess
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +21,7 @@ from experiments.paper.common import (
     CARTPOLE,
     FAMILY_ALGOS,
     MUJOCO,
+    ROOT,
     Scale,
     describe,
     family_config,
@@ -26,7 +29,9 @@ from experiments.paper.common import (
 )
 from ldn_jax import envs
 from ldn_jax.config import Config
-from ldn_jax.host.run_dir import LOCK_FILE, RunDir
+from ldn_jax.host import gym_eval
+from ldn_jax.host.policy import load_policy
+from ldn_jax.host.run_dir import LOCK_FILE, RunDir, write_json
 from ldn_jax.host.training import train
 
 
@@ -285,3 +290,69 @@ def run_fields(entry: dict) -> dict:
         "train_seconds": summary["train_seconds"],
         "compile_seconds": summary["compile_seconds"],
     }
+
+
+def code_version() -> str:
+    """HEAD's commit, with "+dirty" where the package's files differ from it. Read once, when
+    a study's process starts: the process trains with the code it imported then, whatever is
+    committed while it runs."""
+    git = lambda *a: subprocess.run(
+        ["git", *a], cwd=ROOT, capture_output=True, text=True, check=False
+    ).stdout.strip()
+    commit = git("rev-parse", "--short", "HEAD") or "unknown"
+    return commit + ("+dirty" if git("status", "--porcelain", "--", "ldn_jax") else "")
+
+
+def replay(out: Path, config: Config, episodes: int) -> list[list[float]]:
+    """Each seed's greedy returns in gymnasium, `[seeds][episodes]` (`ldn-jax eval`'s)."""
+    returns = []
+    for seed in range(config.first_seed, config.first_seed + config.seeds):
+        env = gym_eval.make_env(config.env, max_steps=config.episode_limit)
+        try:
+            act = load_policy(out, seed)
+            returns.append(gym_eval.episode_returns(env, act, episodes, 0).tolist())
+        finally:
+            env.close()
+    return returns
+
+
+def ensure_replayed(
+    config: Config,
+    out: Path,
+    file: Path,
+    labels: dict,
+    run: tuple[str, int],
+    extra: Callable[[Path], dict] | None = None,
+) -> None:
+    """Train (or resume, or reuse) the run of `config` in `out`, then write `file` (committed,
+    where `out` is not): `labels`, the commits that trained it, its seeds, steps and seconds,
+    the trainer's evaluation, each seed's greedy returns in gymnasium and `extra(out)`'s
+    fields. `run`: (this process's `code_version`, the greedy episodes per seed). While the
+    run trains, `file` names the commits that have trained it so far; a file whose run is
+    unchanged since it was written is left as it is."""
+    code, episodes = run
+    kept = json.loads(file.read_text()) if file.exists() else {}
+    commits = kept.get("commits", [])
+    if not has_finished(out) and code not in commits:
+        commits = [*commits, code]
+        write_json(file, {**kept, **labels, "commits": commits})
+    summary = ensure_run(config, out)
+    if kept.get("train_seconds") == summary["train_seconds"] and "gymnasium" in kept:
+        return
+    if not RunDir(out).is_finished():
+        raise SystemExit(f"error: {out} is a record without checkpoints: replay it where it ran")
+    print(f"replaying {out.name} in gymnasium", flush=True)
+    write_json(
+        file,
+        {
+            **labels,
+            "commits": commits,
+            "seeds": list(range(config.first_seed, config.first_seed + config.seeds)),
+            "steps": config.steps,
+            "train_seconds": summary["train_seconds"],
+            "env_steps_per_second": summary["env_steps_per_second"],
+            "trainer_eval": [r["eval_return"] for r in summary["runs"]],
+            "gymnasium": replay(out, config, episodes),
+            **(extra(out) if extra else {}),
+        },
+    )

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 from pathlib import Path
 
@@ -27,9 +26,8 @@ import numpy as np
 
 from experiments.paper import cache, common
 from ldn_jax.config import Config, from_preset, validate
-from ldn_jax.host import gym_eval, stats
-from ldn_jax.host.policy import load_policy
-from ldn_jax.host.run_dir import RunDir, write_json
+from ldn_jax.host import stats
+from ldn_jax.host.run_dir import RunDir
 from ldn_jax.trainer import Trainer
 
 ENVS = ("halfcheetah", "hopper")
@@ -87,30 +85,6 @@ def run_dir(results: Path, env: str, arm: str, seeds: int, first: int, steps: in
     return results / "runs" / "headline" / f"{env}-{arm}-s{first}+{seeds}-{steps}"
 
 
-def code_version() -> str:
-    """HEAD's commit, with "+dirty" where the package's files differ from it. Read once, when
-    the process starts (`main`): the process trains with the code it imported then, whatever
-    is committed while it runs."""
-    git = lambda *a: subprocess.run(
-        ["git", *a], cwd=common.ROOT, capture_output=True, text=True, check=False
-    ).stdout.strip()
-    commit = git("rev-parse", "--short", "HEAD") or "unknown"
-    return commit + ("+dirty" if git("status", "--porcelain", "--", "ldn_jax") else "")
-
-
-def replay(out: Path, config: Config, episodes: int) -> list[list[float]]:
-    """Each seed's greedy returns in gymnasium, `[seeds][episodes]`."""
-    returns = []
-    for seed in range(config.first_seed, config.first_seed + config.seeds):
-        env = gym_eval.make_env(config.env, max_steps=config.episode_limit)
-        try:
-            act = load_policy(out, seed)
-            returns.append(gym_eval.episode_returns(env, act, episodes, 0).tolist())
-        finally:
-            env.close()
-    return returns
-
-
 def adam_steps(out: Path, config: Config) -> dict[str, list[int]]:
     """Each net's optimiser steps per seed over the whole run, from the final checkpoint."""
     trainer = Trainer(config)
@@ -130,31 +104,9 @@ def ensure(env: str, arm: str, args: argparse.Namespace, code: str) -> None:
     config = config_of(env, arm, args.seeds, args.first_seed, args.steps)
     out = run_dir(args.results, env, arm, args.seeds, args.first_seed, args.steps)
     file = common.out_dir(args.results, "headline/arms") / f"{out.name}.json"
-    kept = json.loads(file.read_text()) if file.exists() else {}
-    commits = kept.get("commits", [])
-    if not cache.has_finished(out) and code not in commits:
-        commits = [*commits, code]
-        write_json(file, {**kept, "env": env, "arm": arm, "commits": commits})
-    summary = cache.ensure_run(config, out)
-    if kept.get("train_seconds") == summary["train_seconds"] and "gymnasium" in kept:
-        return
-    if not RunDir(out).is_finished():
-        raise SystemExit(f"error: {out} is a record without checkpoints: replay it where it ran")
-    print(f"replaying {out.name} in gymnasium", flush=True)
-    write_json(
-        file,
-        {
-            "env": env,
-            "arm": arm,
-            "commits": commits,
-            "seeds": list(range(config.first_seed, config.first_seed + config.seeds)),
-            "steps": config.steps,
-            "train_seconds": summary["train_seconds"],
-            "trainer_eval": [r["eval_return"] for r in summary["runs"]],
-            "gymnasium": replay(out, config, args.episodes),
-            "adam_steps": adam_steps(out, config),
-        },
-    )
+    labels = {"env": env, "arm": arm}
+    extra = lambda out: {"adam_steps": adam_steps(out, config)}
+    cache.ensure_replayed(config, out, file, labels, (code, args.episodes), extra)
 
 
 def rows_of(results: Path, seeds: int, first: int, steps: int) -> list[dict]:
@@ -309,7 +261,7 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         parser.error(f"unknown env or arm: {', '.join(unknown)}")
     if not args.report:
-        code = code_version()
+        code = cache.code_version()
         common.compile_cache(args.results)
         for env in envs:
             for arm in arms:

@@ -20,10 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from experiments.paper import cache, common
-from experiments.paper.headline import code_version, replay
 from ldn_jax.config import Config, from_preset, validate
 from ldn_jax.host import stats
-from ldn_jax.host.run_dir import RunDir, write_json
 
 TASKS = {"inverted_pendulum": (15_000, 1000.0), "halfcheetah": (200_000, 7000.0)}
 TASKS["hopper"] = (200_000, 2300.0)
@@ -50,30 +48,7 @@ def ensure(task: str, first_seed: int, results: Path, code: str) -> None:
     config = config_of(task, first_seed)
     out = run_dir(results, task, first_seed)
     file = common.out_dir(results, "sac/arms") / f"{out.name}.json"
-    kept = json.loads(file.read_text()) if file.exists() else {}
-    commits = kept.get("commits", [])
-    if not cache.has_finished(out) and code not in commits:
-        commits = [*commits, code]
-        write_json(file, {**kept, "task": task, "commits": commits})
-    summary = cache.ensure_run(config, out)
-    if kept.get("train_seconds") == summary["train_seconds"] and "gymnasium" in kept:
-        return
-    if not RunDir(out).is_finished():
-        raise SystemExit(f"error: {out} is a record without checkpoints: replay it where it ran")
-    print(f"replaying {out.name} in gymnasium", flush=True)
-    write_json(
-        file,
-        {
-            "task": task,
-            "commits": commits,
-            "seeds": list(range(first_seed, first_seed + SEEDS)),
-            "steps": config.steps,
-            "train_seconds": summary["train_seconds"],
-            "env_steps_per_second": summary["env_steps_per_second"],
-            "trainer_eval": [r["eval_return"] for r in summary["runs"]],
-            "gymnasium": replay(out, config, EPISODES),
-        },
-    )
+    cache.ensure_replayed(config, out, file, {"task": task}, (code, EPISODES))
 
 
 def report(results: Path) -> None:
@@ -131,7 +106,7 @@ def main(argv: list[str] | None = None) -> int:
     if unknown := [t for t in tasks if t not in TASKS]:
         parser.error(f"unknown task: {', '.join(unknown)}")
     if not args.report:
-        code = code_version()
+        code = cache.code_version()
         common.compile_cache(args.results)
         for task in tasks:
             ensure(task, args.first_seed, args.results, code)

@@ -10,7 +10,7 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from ldn_jax.config import AgentConfig
+from ldn_jax.config import A2CConfig, AgentConfig, Config
 from ldn_jax.learners.base import (
     ActorCritic,
     LearnerState,
@@ -19,6 +19,7 @@ from ldn_jax.learners.base import (
     keep_if_any,
     worker_mean,
 )
+from ldn_jax.learners.ppo import gae
 
 Array = jax.Array
 
@@ -47,36 +48,72 @@ def n_step_targets(
 class A2C(ActorCritic):
     """One RMSProp step per segment on the n-step actor-critic loss."""
 
-    def __init__(self, config: AgentConfig, obs_size: int, action_spec, workers: int = 1):
+    def __init__(
+        self,
+        config: AgentConfig,
+        obs_size: int,
+        action_spec,
+        workers: int = 1,
+        a2c: A2CConfig | None = None,
+    ):
+        """`a2c`: the family's own constants (None: the paper's); the rest as
+        `ActorCritic`'s."""
         super().__init__(config, obs_size, action_spec, workers)
+        self.a2c = a2c = a2c or A2CConfig()
+        torch = a2c.rmsprop == "torch"
         # Hyperparameters injected into the optimiser state are arrays, so a learning rate
         # can differ between vmapped runs.
         rmsprop = lambda lr: optax.inject_hyperparams(optax.rmsprop)(
             learning_rate=lr,
             decay=config.rmsprop_decay,
             eps=config.rmsprop_eps,
-            initial_scale=1.0,  # TensorFlow 1's RMSProp starts its average at one
+            # TensorFlow 1's RMSProp starts its average at one, eps inside the root;
+            # PyTorch's at zero, eps added to the root
+            initial_scale=0.0 if torch else 1.0,
+            eps_in_sqrt=not torch,
         )
         self.optimizer = self.per_net(rmsprop(config.actor_lr), rmsprop(config.critic_lr))
+        if a2c.max_grad_norm is not None:
+            self.optimizer = optax.chain(
+                optax.clip_by_global_norm(a2c.max_grad_norm), self.optimizer
+            )
+
+    @classmethod
+    def of(cls, config: Config, obs_size: int, action_spec) -> A2C:
+        return cls(config.agent, obs_size, action_spec, config.workers, config.a2c)
+
+    def advantage(self, params: dict, segment: Segment) -> Array:
+        """The advantages of a canonical segment, `[n, W]`: n-step targets minus V(s), or
+        GAE's under `a2c.gae_lambda` < 1. Only V(s) carries a gradient (the critic's)."""
+        cfg = self.config
+        reward = self.training_reward(params, segment)
+        next_value = jax.lax.stop_gradient(self.value(params, segment.next_obs))
+        value = self.value(params, segment.obs)
+        if self.a2c.gae_lambda == 1.0:
+            targets = n_step_targets(
+                reward, next_value, segment.terminated, segment.done, cfg.gamma
+            )
+            return targets - value
+        estimates = gae(
+            reward,
+            jax.lax.stop_gradient(value),
+            next_value,
+            segment.terminated,
+            segment.done,
+            (cfg.gamma, self.a2c.gae_lambda),
+        )
+        return jax.lax.stop_gradient(estimates + value) - value
 
     def loss(self, params: dict, segment: Segment) -> tuple[Array, dict]:
         """The A3C loss of a canonical segment (masked steps zeroed), averaged over workers."""
         cfg = self.config
         weight = segment.weight
-        next_value = jax.lax.stop_gradient(self.value(params, segment.next_obs))
-        targets = n_step_targets(
-            self.training_reward(params, segment),
-            next_value,
-            segment.terminated,
-            segment.done,
-            cfg.gamma,
-        )
-        advantage = targets - self.value(params, segment.obs)
+        advantage = self.advantage(params, segment)
         log_prob, entropy = self.log_prob_entropy(params, segment.obs, segment.action)
         critic_loss = worker_mean(jnp.square(advantage), weight)
         policy_loss = -worker_mean(log_prob * jax.lax.stop_gradient(advantage), weight)
         entropy_mean = worker_mean(entropy, weight)
-        total = policy_loss - cfg.entropy_beta * entropy_mean + critic_loss
+        total = policy_loss - cfg.entropy_beta * entropy_mean + self.a2c.value_coef * critic_loss
         return total, {
             "actor_loss": policy_loss,
             "critic_loss": critic_loss,

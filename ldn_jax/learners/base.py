@@ -256,12 +256,19 @@ class ActorCritic:
         self.workers = workers
         log_std = config.log_std_init is not None
         self.policy = make_policy(action_spec, config.min_std, log_std, config.squash_mean)
-        mlp = lambda hidden, out: MLP(
-            hidden, out, config.activation, config.init_std, config.hidden_layers, config.init
+        mlp = lambda hidden, out, gain: MLP(
+            hidden,
+            out,
+            config.activation,
+            config.init_std,
+            config.hidden_layers,
+            config.init,
+            gain,
         )
         out_size = getattr(self.policy, "net_out_size", self.policy.out_size)
-        self.actor = mlp(config.actor_hidden, out_size)
-        self.critic = mlp(config.critic_hidden, 1)
+        # under the orthogonal init, SB3's output gains: small actions, unit values
+        self.actor = mlp(config.actor_hidden, out_size, 0.01)
+        self.critic = mlp(config.critic_hidden, 1, 1.0)
 
     def init(self, key: Array) -> LearnerState:
         k_actor, k_critic = jax.random.split(key)

@@ -1,0 +1,101 @@
+"""The A2C family's own section (`a2c.*`): GAE, the gradient clip, PyTorch's RMSProp, and
+the paper's A2C left as it was."""
+
+from types import SimpleNamespace
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from ldn_jax.config import A2CConfig, AgentConfig, from_preset, validate
+from ldn_jax.learners.a2c import A2C, n_step_targets
+from ldn_jax.learners.base import Segment
+from ldn_jax.learners.ppo import gae
+
+OBS, ACTIONS, N, W = 5, 2, 6, 3
+SPEC = SimpleNamespace(discrete=False, size=ACTIONS, low=(-1.0,) * ACTIONS, high=(1.0,) * ACTIONS)
+
+
+def segment(key) -> Segment:
+    keys = jax.random.split(key, 5)
+    done = jax.random.uniform(keys[3], (N, W)) < 0.2
+    return Segment(
+        obs=jax.random.normal(keys[0], (N, W, OBS)),
+        action=jax.random.uniform(keys[1], (N, W, ACTIONS), minval=-1, maxval=1),
+        reward=jax.random.normal(keys[2], (N, W)),
+        next_obs=jax.random.normal(keys[4], (N, W, OBS)),
+        terminated=done & (jax.random.uniform(keys[3], (N, W)) < 0.1),
+        done=done,
+        weight=jnp.ones((N, W)),
+    )
+
+
+def learner(**a2c) -> A2C:
+    agent = AgentConfig(gamma=0.97, log_std_init=0.0, squash_mean=False, rmsprop_eps=1e-5)
+    return A2C(agent, OBS, SPEC, W, A2CConfig(**a2c))
+
+
+def test_advantages_are_n_step_at_lambda_one_and_gae_below():
+    seg = segment(jax.random.key(0))
+    paper, lam = learner(), learner(gae_lambda=0.9)
+    params = paper.init(jax.random.key(1)).params
+    value = paper.value(params, seg.obs)
+    next_value = paper.value(params, seg.next_obs)
+    targets = n_step_targets(seg.reward, next_value, seg.terminated, seg.done, 0.97)
+    np.testing.assert_array_equal(paper.advantage(params, seg), targets - value)
+    expected = gae(seg.reward, value, next_value, seg.terminated, seg.done, (0.97, 0.9))
+    np.testing.assert_allclose(lam.advantage(params, seg), expected, rtol=1e-5, atol=1e-6)
+    assert not np.allclose(expected, targets - value, atol=1e-3)
+
+
+def test_torch_rmsprop_steps_as_pytorch_does():
+    """PyTorch: v = (1 - a) g^2 from zero, p <- p - lr g / (sqrt(v) + eps)."""
+    net = learner(rmsprop="torch")
+    params = net.init(jax.random.key(2)).params
+    grads = jax.tree.map(lambda p: jnp.full_like(p, 0.003), params)
+    state = net.optimizer.init(params)
+    updates, _ = net.optimizer.update(grads, state, params)
+    decay, eps, lr = 0.9, 1e-5, net.config.actor_lr
+    expected = -lr * 0.003 / (np.sqrt((1 - decay) * 0.003**2) + eps)
+    np.testing.assert_allclose(updates["actor"]["params"]["Dense_0"]["kernel"], expected, rtol=1e-5)
+    tf1 = learner()  # TensorFlow 1: v = a + (1 - a) g^2 from one, eps inside the root
+    updates, _ = tf1.optimizer.update(grads, tf1.optimizer.init(params), params)
+    expected = -lr * 0.003 / np.sqrt(decay + (1 - decay) * 0.003**2 + eps)
+    np.testing.assert_allclose(updates["actor"]["params"]["Dense_0"]["kernel"], expected, rtol=1e-5)
+
+
+def test_the_clip_scales_actor_and_critic_gradients_together():
+    clipped, free = learner(rmsprop="torch", max_grad_norm=1e-6), learner(rmsprop="torch")
+    params = clipped.init(jax.random.key(3)).params
+    grads = jax.tree.map(lambda p: jnp.full_like(p, 0.01), params)
+    norm = np.sqrt(sum(float(jnp.sum(g**2)) for g in jax.tree.leaves(grads)))
+    updates, _ = clipped.optimizer.update(grads, clipped.optimizer.init(params), params)
+    scaled = jax.tree.map(lambda g: g * 1e-6 / norm, grads)
+    expected, _ = free.optimizer.update(scaled, free.optimizer.init(params), params)
+    for a, b in zip(jax.tree.leaves(updates), jax.tree.leaves(expected), strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-4)
+    unclipped, _ = free.optimizer.update(grads, free.optimizer.init(params), params)
+    assert not np.allclose(jax.tree.leaves(unclipped)[0], jax.tree.leaves(updates)[0])
+
+
+def test_the_value_weight_scales_the_critic_loss():
+    seg = segment(jax.random.key(4))
+    one, half = learner(), learner(value_coef=0.5)
+    params = one.init(jax.random.key(5)).params
+    (total_one, info), (total_half, _) = one.loss(params, seg), half.loss(params, seg)
+    np.testing.assert_allclose(total_one - total_half, 0.5 * info["critic_loss"], rtol=1e-5)
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        ("rmsprop", "adam", "a2c rmsprop must be one of tf1, torch"),
+        ("gae_lambda", 1.5, "a2c gae_lambda must be in [0, 1]"),
+        ("max_grad_norm", 0.0, "a2c max_grad_norm must be > 0"),
+        ("value_coef", -1.0, "a2c value_coef must be >= 0"),
+    ],
+)
+def test_bad_a2c_fields_are_refused(field, value, message):
+    with pytest.raises(ValueError, match=message.replace("[", r"\[").replace("]", r"\]")):
+        validate(from_preset("paper", env="halfcheetah", algo="a2c", a2c={field: value}))
