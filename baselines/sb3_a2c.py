@@ -6,7 +6,9 @@ Not part of the package, and not run by the tests: it needs torch, stable-baseli
 gymnasium[mujoco] in an interpreter of their own (see sb3_ppo.py). The zoo's MuJoCo entry for
 A2C is SB3's defaults (1 env, n_steps 5, learning rate 7e-4, gamma 0.99, GAE lambda 1, RMSprop
 with eps 1e-5, value coefficient 0.5, gradient clip 0.5, 64 x 64 tanh nets with orthogonal
-init, log std 0) under VecNormalize of the observations only; its published figures at 1M
+init, log std 0) under VecNormalize: the zoo's `normalize: true` is SB3's VecNormalize
+defaults, observations and rewards (the discounted return's running std, gamma 0.99, both
+clipped at 10), the rewards for training only; its published figures at 1M
 steps: HalfCheetah-v3 3,041 (benchmark.md), Hopper-v3 733. Trains one seed on gymnasium's v5
 task and prints one JSON line as sb3_ppo.py does.
 """
@@ -29,7 +31,7 @@ def main() -> None:
     task, seed, steps = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
     env_id = TASKS[task]
     torch.set_num_threads(1)
-    env = VecNormalize(make_vec_env(env_id, n_envs=1, seed=seed), norm_obs=True, norm_reward=False)
+    env = VecNormalize(make_vec_env(env_id, n_envs=1, seed=seed))
     model = A2C("MlpPolicy", env, seed=seed, verbose=0)
     start = time.time()
     model.learn(steps)
