@@ -141,7 +141,11 @@ TASKS: dict[str, dict[str, object]] = {
     "inverted_pendulum": {"steps": 600_000, "chunk_iterations": 1},
     "halfcheetah": {
         **_LONG,
-        "learners": {**_LOCOMOTION, "ppo": {**_LOCOMOTION["ppo"], **_ZOO_HALFCHEETAH_PPO}},
+        "learners": {
+            # standardised observations (docs/defaults.md, "Locomotion tasks")
+            "a2c": {**_LOCOMOTION["a2c"], "agent.normalize_obs": True},
+            "ppo": {**_LOCOMOTION["ppo"], **_ZOO_HALFCHEETAH_PPO},
+        },
     },
     "hopper": {**_LONG, "learners": _HOPPING},
     "walker2d": {**_LONG, "learners": _HOPPING},
