@@ -99,3 +99,21 @@ def test_the_value_weight_scales_the_critic_loss():
 def test_bad_a2c_fields_are_refused(field, value, message):
     with pytest.raises(ValueError, match=message.replace("[", r"\[").replace("]", r"\]")):
         validate(from_preset("paper", env="halfcheetah", algo="a2c", a2c={field: value}))
+
+
+def test_the_tuning_study_arms_are_valid_runs_and_sb3s_is_sb3s_a2c():
+    from experiments.paper import a2c as study
+
+    for arm in study.ARMS:
+        for task in study.TASKS:
+            assert study.config_of(task, arm, 0, 1000).algo == "a2c"
+    sb3 = study.config_of("halfcheetah", "sb3", 0, 1000)
+    assert (sb3.workers, sb3.agent.n_steps, sb3.schedule) == (1, 5, "steps")
+    assert (sb3.a2c.rmsprop, sb3.a2c.max_grad_norm, sb3.a2c.value_coef) == ("torch", 0.5, 0.5)
+    assert sb3.agent.normalize_obs and sb3.agent.normalize_reward
+    assert (sb3.agent.init, sb3.agent.hidden_layers, sb3.agent.actor_hidden) == (
+        "orthogonal",
+        2,
+        64,
+    )
+    assert sb3.agent.actor_lr == sb3.agent.critic_lr == 7e-4

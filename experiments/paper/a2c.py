@@ -3,6 +3,12 @@ SB3's A2C (the zoo's MuJoCo runs), each arm a vmapped program of 5 seeds.
 
     python -m experiments.paper.a2c [--tasks TASK,...] [--arms ARM,...] [--steps N]
                                     [--first-seed S] [--report]
+    python -m experiments.paper.a2c --user-command
+
+`--user-command` trains (or reuses) the command users start with, `ldn-jax --env halfcheetah
+--algo ldn --seeds 10` (10 seeds x K in {0.5, 1, 2}, 1M steps), and replays its 30 greedy
+policies in gymnasium into `a2c/user-command.json` and `.md`: the IQM per K with its
+interval, and the wall clock.
 
 Each arm is today's task default plus the fields below (each arm adds one knob to the one
 before it, unless its entry says otherwise). Trains every run (resumed when interrupted,
@@ -23,7 +29,8 @@ import numpy as np
 
 from experiments.paper import cache, common
 from ldn_jax.config import Config, from_preset, validate
-from ldn_jax.host import stats
+from ldn_jax.host import gym_eval, stats
+from ldn_jax.host.policy import load_policy
 
 TASKS = ("halfcheetah", "hopper", "walker2d")
 SEEDS = 5
@@ -138,6 +145,63 @@ def report(results: Path) -> None:
     print(f"wrote {out}/a2c.json and a2c.md")
 
 
+USER_RUN = "halfcheetah-ldn-s0+10-1000000"
+"""The user's command's run directory under `runs/a2c/` (its record under `records/a2c/`)."""
+
+
+def user_command(results: Path) -> None:
+    """Train or reuse `ldn-jax --env halfcheetah --algo ldn --seeds 10`, replay each seed and
+    K in gymnasium, and write the IQM per K with the run's wall clock."""
+    config = validate(from_preset("paper", env="halfcheetah", algo="ldn", seeds=10))
+    out = results / "runs" / "a2c" / USER_RUN
+    summary = cache.ensure_run(config, out)
+    returns = {}
+    for k in config.k:
+        returns[k] = []
+        for seed in range(config.first_seed, config.first_seed + config.seeds):
+            env = gym_eval.make_env(config.env, max_steps=config.episode_limit)
+            try:
+                act = load_policy(out, seed, k)
+                returns[k].append(gym_eval.episode_returns(env, act, EPISODES, 0).tolist())
+            finally:
+                env.close()
+    scores = {k: [float(np.mean(r)) for r in rows] for k, rows in returns.items()}
+    every = [s for k in config.k for s in scores[k]]
+    data = {
+        "command": "ldn-jax --env halfcheetah --algo ldn --seeds 10",
+        "commit": cache.code_version(),
+        "train_seconds": summary["train_seconds"],
+        "compile_seconds": summary["compile_seconds"],
+        "env_steps_per_second": summary["env_steps_per_second"],
+        "imagined_steps": [r.get("imagined_steps") for r in summary["runs"]],
+        "gymnasium": {str(k): rows for k, rows in returns.items()},
+        "iqm_by_k": {str(k): stats.estimate(scores[k]) for k in config.k},
+        "iqm_all": stats.estimate(every),
+    }
+    folder = common.out_dir(results, "a2c")
+    common.write_json(folder / "user-command.json", data)
+    lines = [
+        f"## `{data['command']}` at {data['commit']}",
+        "",
+        "Greedy return in gymnasium (10 episodes per seed and K): IQM [95% bootstrap "
+        f"interval]. Training {summary['train_seconds']:,.0f} s, compile "
+        f"{summary['compile_seconds']:,.0f} s, {summary['env_steps_per_second']:,.0f} env "
+        "steps/s on the machine that ran it.",
+        "",
+        "| K | greedy return | per seed |",
+        "|---|---|---|",
+        *(
+            f"| {k:g} | {stats.text(stats.estimate(scores[k]))} | "
+            + ", ".join(f"{x:,.0f}" for x in scores[k])
+            + " |"
+            for k in config.k
+        ),
+        f"| all 30 | {stats.text(data['iqm_all'])} | |",
+    ]
+    (folder / "user-command.md").write_text("\n".join(lines) + "\n")
+    print(f"wrote {folder}/user-command.json and user-command.md")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--tasks", default="halfcheetah")
@@ -145,8 +209,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, default=STEPS)
     parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--report", action="store_true", help="train nothing; rebuild the report")
+    parser.add_argument("--user-command", action="store_true", help="the user's command only")
     parser.add_argument("--results", type=Path, default=common.RESULTS)
     args = parser.parse_args(argv)
+    if args.user_command:
+        common.compile_cache(args.results)
+        user_command(args.results)
+        return 0
     tasks, arms = args.tasks.split(","), args.arms.split(",")
     if unknown := [t for t in tasks if t not in TASKS] + [a for a in arms if a not in ARMS]:
         parser.error(f"unknown task or arm: {', '.join(unknown)}")
