@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import subprocess
 import sys
 from pathlib import Path
 
@@ -170,6 +171,7 @@ def user_command(results: Path) -> None:
     data = {
         "command": "ldn-jax --env halfcheetah --algo ldn --seeds 10",
         "commit": cache.code_version(),
+        "package_commit": _last_package_commit(),
         "train_seconds": summary["train_seconds"],
         "compile_seconds": summary["compile_seconds"],
         "env_steps_per_second": summary["env_steps_per_second"],
@@ -181,7 +183,7 @@ def user_command(results: Path) -> None:
     folder = common.out_dir(results, "a2c")
     common.write_json(folder / "user-command.json", data)
     lines = [
-        f"## `{data['command']}` at {data['commit']}",
+        f"## `{data['command']}` at {data['commit']} (package code of {data['package_commit']})",
         "",
         "Greedy return in gymnasium (10 episodes per seed and K): IQM [95% bootstrap "
         f"interval]. Training {summary['train_seconds']:,.0f} s, compile "
@@ -200,6 +202,13 @@ def user_command(results: Path) -> None:
     ]
     (folder / "user-command.md").write_text("\n".join(lines) + "\n")
     print(f"wrote {folder}/user-command.json and user-command.md")
+
+
+def _last_package_commit() -> str:
+    """The last commit that changed the package or its pins: the code a reused run was
+    trained with, where the tree has not changed them since."""
+    git = ["git", "log", "-1", "--format=%h", "--", "ldn_jax", "pyproject.toml"]
+    return subprocess.run(git, cwd=common.ROOT, capture_output=True, text=True).stdout.strip()
 
 
 def main(argv: list[str] | None = None) -> int:
