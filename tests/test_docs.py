@@ -131,6 +131,10 @@ def test_the_readme_sac_rows_have_a_record_per_scored_run():
     _study_files_with_records("sac")
 
 
+def test_the_readme_a2c_rows_have_a_record_per_scored_run():
+    _study_files_with_records("a2c")
+
+
 def _words(text: str) -> set[str]:
     return set(re.findall(r"[\w-]+", text))
 

@@ -89,7 +89,9 @@ class A2C(ActorCritic):
         reward = self.training_reward(params, segment)
         next_value = jax.lax.stop_gradient(self.value(params, segment.next_obs))
         value = self.value(params, segment.obs)
-        if self.a2c.gae_lambda == 1.0:
+        lam = self.a2c.gae_lambda
+        # a swept lambda is traced: every point then takes GAE's form (at 1, the same returns)
+        if isinstance(lam, int | float) and lam == 1.0:
             targets = n_step_targets(
                 reward, next_value, segment.terminated, segment.done, cfg.gamma
             )
@@ -100,7 +102,7 @@ class A2C(ActorCritic):
             next_value,
             segment.terminated,
             segment.done,
-            (cfg.gamma, self.a2c.gae_lambda),
+            (cfg.gamma, lam),
         )
         return jax.lax.stop_gradient(estimates + value) - value
 
