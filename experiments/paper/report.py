@@ -182,9 +182,10 @@ def render(results: Path, scale: common.Scale) -> str:
     for section in (setup(data, scale), summary, *body):
         lines += render_section(section)
     # The studies run on their own (experiments/paper/headline.py, sac.py, locomotion.py,
-    # family.py and branched.py); the confirmatory ones first.
-    for study in ("headline", "sac", "locomotion", "family", "branched"):
-        text = results / study / f"{study}.md"
+    # family.py, a2c.py and branched.py); the confirmatory ones first.
+    studies = ("headline", "sac", "locomotion", "family", "a2c/user-command", "a2c/a2c", "branched")
+    for study in studies:
+        text = results / (f"{study}/{study}.md" if "/" not in study else f"{study}.md")
         if text.exists():
             lines += ["", text.read_text().strip(), ""]
     return "\n".join(lines)
