@@ -148,6 +148,25 @@ def report(results: Path) -> None:
     print(f"wrote {out}/a2c.json and a2c.md")
 
 
+CONFIRM_SEEDS = 10
+"""The plan's fresh seeds (`experiments/plans/a2c.md`): 10-14."""
+CONFIRM_ALGOS = ("a2c", "a2c-model", "ldn")
+
+
+def confirm(task: str, algo: str, results: Path, code: str) -> None:
+    """One of the plan's runs: `ldn-jax --env TASK --algo ALGO --seeds 5 --first-seed 10
+    --k 1` at the task's defaults, replayed in gymnasium into `a2c/confirm/`."""
+    config = from_preset(
+        "paper", env=task, algo=algo, seeds=SEEDS, first_seed=CONFIRM_SEEDS, k=(1.0,)
+    )
+    config = validate(config)
+    name = f"{task}-{algo}-s{CONFIRM_SEEDS}+{SEEDS}-{config.steps}"
+    out = results / "runs" / "a2c" / "confirm" / name
+    file = common.out_dir(results, "a2c/confirm") / f"{name}.json"
+    labels = {"task": task, "algo": algo}
+    cache.ensure_replayed(config, out, file, labels, (code, EPISODES))
+
+
 USER_RUN = "halfcheetah-ldn-s0+10-1000000"
 """The user's command's run directory under `runs/a2c/` (its record under `records/a2c/`)."""
 
@@ -229,11 +248,23 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--report", action="store_true", help="train nothing; rebuild the report")
     parser.add_argument("--user-command", action="store_true", help="the user's command only")
+    parser.add_argument(
+        "--confirm", metavar="ALGO,...", help="the plan's runs on seeds 10-14 of --tasks"
+    )
     parser.add_argument("--results", type=Path, default=common.RESULTS)
     args = parser.parse_args(argv)
     if args.user_command:
         common.compile_cache(args.results)
         user_command(args.results)
+        return 0
+    if args.confirm:
+        if unknown := [a for a in args.confirm.split(",") if a not in CONFIRM_ALGOS]:
+            parser.error(f"unknown algorithm for --confirm: {', '.join(unknown)}")
+        code = cache.code_version()
+        common.compile_cache(args.results)
+        for task in args.tasks.split(","):
+            for algo in args.confirm.split(","):
+                confirm(task, algo, args.results, code)
         return 0
     tasks, arms = args.tasks.split(","), args.arms.split(",")
     if unknown := [t for t in tasks if t not in TASKS] + [a for a in arms if a not in ARMS]:
