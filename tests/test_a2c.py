@@ -117,3 +117,12 @@ def test_the_tuning_study_arms_are_valid_runs_and_sb3s_is_sb3s_a2c():
         64,
     )
     assert sb3.agent.actor_lr == sb3.agent.critic_lr == 7e-4
+
+
+def test_the_study_refuses_an_algorithm_outside_the_plan(capsys):
+    from experiments.paper import a2c as study
+
+    with pytest.raises(SystemExit) as stop:
+        study.main(["--confirm", "ppo"])
+    assert stop.value.code == 2
+    assert "unknown algorithm for --confirm: ppo" in capsys.readouterr().err
