@@ -114,13 +114,7 @@ def ensure(task: str, arm: str, args: argparse.Namespace, code: str) -> None:
 
 
 def report(results: Path) -> None:
-    rows = []
-    for file in sorted((results / "a2c" / "arms").glob("*.json")):
-        data = json.loads(file.read_text())
-        if "gymnasium" not in data:
-            continue
-        scores = [float(np.mean(r)) for r in data["gymnasium"]]
-        rows.append({**data, "scores": scores, "score": stats.estimate(scores)})
+    rows = _scored(results / "a2c" / "arms")
     order = {arm: i for i, arm in enumerate(ARMS)}
     rows.sort(key=lambda r: (r["task"], r["steps"], r["seeds"][0], order.get(r["arm"], 99)))
     lines = [
@@ -142,10 +136,36 @@ def report(results: Path) -> None:
             f"| {r['task']} | {r['steps']:,} | {seeds} | {r['arm']} | {stats.text(r['score'])} "
             f"| {each} | {r['env_steps_per_second']:,.0f} | {', '.join(r['commits'])} |"
         )
+    confirmed = _scored(results / "a2c" / "confirm")
+    lines += [
+        "",
+        "The plan's runs on fresh seeds (confirmatory, `experiments/plans/a2c.md`; K = 1, the "
+        "task defaults):",
+        "",
+        "| task | algorithm | steps | seeds | greedy return | per seed | code |",
+        "|---|---|---|---|---|---|---|",
+        *(
+            f"| {r['task']} | {r['algo']} | {r['steps']:,} | {r['seeds'][0]}-{r['seeds'][-1]} "
+            f"| {stats.text(r['score'])} | {', '.join(f'{s:,.0f}' for s in r['scores'])} "
+            f"| {', '.join(r['commits'])} |"
+            for r in confirmed
+        ),
+    ]
     out = common.out_dir(results, "a2c")
-    common.write_json(out / "a2c.json", {"rows": rows})
+    common.write_json(out / "a2c.json", {"rows": rows, "confirmatory": confirmed})
     (out / "a2c.md").write_text("\n".join(lines) + "\n")
     print(f"wrote {out}/a2c.json and a2c.md")
+
+
+def _scored(folder: Path) -> list[dict]:
+    """The files in `folder` replayed in gymnasium, each with its per-seed scores and IQM."""
+    rows = []
+    for file in sorted(folder.glob("*.json")):
+        data = json.loads(file.read_text())
+        if "gymnasium" in data:
+            scores = [float(np.mean(r)) for r in data["gymnasium"]]
+            rows.append({**data, "scores": scores, "score": stats.estimate(scores)})
+    return rows
 
 
 CONFIRM_SEEDS = 10
@@ -265,6 +285,7 @@ def main(argv: list[str] | None = None) -> int:
         for task in args.tasks.split(","):
             for algo in args.confirm.split(","):
                 confirm(task, algo, args.results, code)
+                report(args.results)
         return 0
     tasks, arms = args.tasks.split(","), args.arms.split(",")
     if unknown := [t for t in tasks if t not in TASKS] + [a for a in arms if a not in ARMS]:
