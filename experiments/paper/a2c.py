@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 from pathlib import Path
 
@@ -30,8 +29,7 @@ import numpy as np
 
 from experiments.paper import cache, common
 from ldn_jax.config import Config, from_preset, validate
-from ldn_jax.host import gym_eval, stats
-from ldn_jax.host.policy import load_policy
+from ldn_jax.host import stats
 
 TASKS = ("halfcheetah", "hopper", "walker2d")
 SEEDS = 5
@@ -82,21 +80,8 @@ on 8 workers; "obs-reward" is "obs-norm" with the rewards standardised too."""
 
 
 def config_of(task: str, arm: str, first_seed: int, steps: int) -> Config:
-    fields: dict[str, dict | object] = {}
-    for name, value in ARMS[arm].items():
-        section, _, field = name.rpartition(".")
-        if section:
-            fields.setdefault(section, {})[field] = value
-        else:
-            fields[name] = value
     config = from_preset(
-        "paper",
-        env=task,
-        algo="a2c",
-        seeds=SEEDS,
-        first_seed=first_seed,
-        steps=steps,
-        **fields,
+        "paper", env=task, algo="a2c", seeds=SEEDS, first_seed=first_seed, steps=steps, **ARMS[arm]
     )
     return validate(config)
 
@@ -197,22 +182,13 @@ def user_command(results: Path) -> None:
     config = validate(from_preset("paper", env="halfcheetah", algo="ldn", seeds=10))
     out = results / "runs" / "a2c" / USER_RUN
     summary = cache.ensure_run(config, out)
-    returns = {}
-    for k in config.k:
-        returns[k] = []
-        for seed in range(config.first_seed, config.first_seed + config.seeds):
-            env = gym_eval.make_env(config.env, max_steps=config.episode_limit)
-            try:
-                act = load_policy(out, seed, k)
-                returns[k].append(gym_eval.episode_returns(env, act, EPISODES, 0).tolist())
-            finally:
-                env.close()
+    returns = {k: cache.replay(out, config, EPISODES, k) for k in config.k}
     scores = {k: [float(np.mean(r)) for r in rows] for k, rows in returns.items()}
     every = [s for k in config.k for s in scores[k]]
     data = {
         "command": "ldn-jax --env halfcheetah --algo ldn --seeds 10",
         "commit": cache.code_version(),
-        "package_commit": _last_package_commit(),
+        "package_commit": cache.package_commit(),
         "train_seconds": summary["train_seconds"],
         "compile_seconds": summary["compile_seconds"],
         "env_steps_per_second": summary["env_steps_per_second"],
@@ -251,13 +227,6 @@ def user_report(folder: Path) -> None:
     ]
     (folder / "user-command.md").write_text("\n".join(lines) + "\n")
     print(f"wrote {folder}/user-command.json and user-command.md")
-
-
-def _last_package_commit() -> str:
-    """The last commit that changed the package or its pins: the code a reused run was
-    trained with, where the tree has not changed them since."""
-    git = ["git", "log", "-1", "--format=%h", "--", "ldn_jax", "pyproject.toml"]
-    return subprocess.run(git, cwd=common.ROOT, capture_output=True, text=True).stdout.strip()
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -303,13 +303,21 @@ def code_version() -> str:
     return commit + ("+dirty" if git("status", "--porcelain", "--", "ldn_jax") else "")
 
 
-def replay(out: Path, config: Config, episodes: int) -> list[list[float]]:
-    """Each seed's greedy returns in gymnasium, `[seeds][episodes]` (`ldn-jax eval`'s)."""
+def package_commit() -> str:
+    """The last commit that changed the package or its pins: the code a reused run was
+    trained with, where the tree has not changed them since."""
+    git = ["git", "log", "-1", "--format=%h", "--", "ldn_jax", "pyproject.toml"]
+    return subprocess.run(git, cwd=ROOT, capture_output=True, text=True).stdout.strip()
+
+
+def replay(out: Path, config: Config, episodes: int, k: float | None = None) -> list[list[float]]:
+    """Each seed's greedy returns in gymnasium at `k` (None: the run's first K), `[seeds]
+    [episodes]` (`ldn-jax eval`'s)."""
     returns = []
     for seed in range(config.first_seed, config.first_seed + config.seeds):
         env = gym_eval.make_env(config.env, max_steps=config.episode_limit)
         try:
-            act = load_policy(out, seed)
+            act = load_policy(out, seed, k)
             returns.append(gym_eval.episode_returns(env, act, episodes, 0).tolist())
         finally:
             env.close()

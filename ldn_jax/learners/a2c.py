@@ -16,10 +16,10 @@ from ldn_jax.learners.base import (
     LearnerState,
     Segment,
     canonical,
+    gae,
     keep_if_any,
     worker_mean,
 )
-from ldn_jax.learners.ppo import gae
 
 Array = jax.Array
 

@@ -72,6 +72,34 @@ def training_reward(segment: Segment, config: AgentConfig) -> Array:
     return reward if isinstance(scale, float) and scale == 1.0 else reward * scale
 
 
+def gae(
+    reward: Array,
+    value: Array,
+    next_value: Array,
+    terminated: Array,
+    done: Array,
+    discounts: tuple[float, float],
+) -> Array:
+    """Generalised advantage estimates of one segment, `[n, W] -> [n, W]`, with `discounts`
+    = (gamma, lambda).
+
+    delta_t = r_t + gamma * (1 - terminated_t) * V(s'_t) - V(s_t);
+    A_t = delta_t + gamma * lam * (1 - done_t) * A_{t+1}, and A_{n} = 0 past the segment.
+    A truncation (time limit, LD stop) bootstraps from V(s'_t) and ends the recursion; a
+    termination does neither.
+    """
+    gamma, lam = discounts
+    delta = reward + gamma * (1.0 - terminated.astype(reward.dtype)) * next_value - value
+
+    def backward(following, step):
+        delta, done = step
+        advantage = delta + gamma * lam * jnp.where(done, 0.0, following)
+        return advantage, advantage
+
+    _, advantages = jax.lax.scan(backward, jnp.zeros_like(delta[-1]), (delta, done), reverse=True)
+    return advantages
+
+
 def worker_mean(x: Array, weight: Array) -> Array:
     """Mean over each worker's live steps, then over workers with any: `[n, W] -> []`.
 
