@@ -21,6 +21,10 @@ class Transitions:
     """`[..., obs_size]`"""
     reward: Array
     """`[...]`"""
+    terminated: Array | None = None
+    """`[...]`, 1.0 where the step ended its episode by the task's own test; kept only for a
+    learned termination (`ImagineConfig.termination`), None otherwise (so other buffers keep
+    their layout)."""
 
 
 @struct.dataclass
@@ -37,9 +41,12 @@ class Buffer:
         return self.data.reward.shape[0]
 
 
-def buffer_init(capacity: int, obs_size: int, action_size: int) -> Buffer:
+def buffer_init(capacity: int, obs_size: int, action_size: int, terminated: bool = False) -> Buffer:
+    """An empty buffer; `terminated`: it keeps each row's termination too."""
     zeros = lambda *shape: jnp.zeros((capacity, *shape), jnp.float32)
     data = Transitions(zeros(obs_size), zeros(action_size), zeros(obs_size), zeros())
+    if terminated:
+        data = data.replace(terminated=zeros())
     return Buffer(data=data, size=jnp.zeros((), jnp.int32), cursor=jnp.zeros((), jnp.int32))
 
 

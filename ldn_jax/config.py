@@ -38,6 +38,9 @@ IMAGINED_STEPS = ("sample", "mean")
 WORLDS = ("model", "true", "true-reward", "true-state")
 """What steps imagined rollouts (`ModelConfig.world`)."""
 
+TERMINATIONS = ("known", "learned")
+"""What ends an imagined episode as a termination (`ImagineConfig.termination`)."""
+
 IMAGINED_STD = ("learn", "real")
 """What branched imagination's updates do to a state-independent log std
 (`ImagineConfig.std`)."""
@@ -497,6 +500,13 @@ class ImagineConfig:
     fewer passes over more of them is a trade the learner's epochs, chosen for scarce real
     rows, do not make: at halfcheetah's 20 epochs, imagination and its updates are the
     largest share of a branched run's time (docs/logs/imagination.md)."""
+    termination: str = "known"
+    """What says an imagined step terminated (no bootstrap), one of `TERMINATIONS`: "known":
+    the task's own test on the predicted observation (MBPO's static functions; halfcheetah
+    never terminates); "learned": a classifier of the next observation fitted beside M1 on
+    the real buffer's terminations (a class-balanced cross-entropy, as many Adam steps as
+    `model.updates`; `Dynamics.fit_termination`), for tasks whose test is not known. The real
+    buffer then keeps each row's termination."""
 
 
 @dataclass(frozen=True)
@@ -873,6 +883,7 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "imagine.updates": IMAGINED_UPDATES,
     "model.imagined_step": IMAGINED_STEPS,
     "model.world": WORLDS,
+    "imagine.termination": TERMINATIONS,
     "model.activation": ACTIVATIONS,
 }
 """The fields that take one of a list of names, and the names (what `validate` accepts; the
@@ -1283,6 +1294,10 @@ def _branch_checks(config: Config) -> list[tuple[bool, str]]:
         ),
         (imagine.ratio > 0, f"imagine.ratio must be > 0, got {imagine.ratio}"),
         (0 <= imagine.real_share < 1, f"real_share must be in [0, 1), got {imagine.real_share}"),
+        (
+            imagine.termination in TERMINATIONS,
+            f"unknown termination {imagine.termination!r}; valid: {', '.join(TERMINATIONS)}",
+        ),
         (
             config.imagine.mode in IMAGINE_MODES,
             f"unknown imagine {config.imagine.mode!r}; valid: {', '.join(IMAGINE_MODES)}",

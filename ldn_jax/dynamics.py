@@ -24,7 +24,7 @@ from ldn_jax.buffer import (
     buffer_sample_split,
 )
 from ldn_jax.config import ModelConfig
-from ldn_jax.networks import DynamicsModel, GaussianDynamicsModel
+from ldn_jax.networks import MLP, DynamicsModel, GaussianDynamicsModel
 
 Array = jax.Array
 
@@ -34,6 +34,10 @@ MIN_WIDTH = 1e-3
 BOUND_PENALTY = 0.01
 """Weight of the penalty sum(max_log_var) - sum(min_log_var) in a probabilistic model's loss
 (PETS' and MBPO's value): it keeps the learned log-variance bounds tight."""
+
+TERMINATION_STREAM = 7
+"""`jax.random.fold_in(key, ...)` of the learned termination's draws (its initial parameters,
+its fit's minibatches), so M1's stay as they are."""
 
 HOLDOUT_BATCH = 1024
 """Held-out transitions drawn to rank a probabilistic ensemble's members after each fit."""
@@ -54,6 +58,18 @@ class Normalizer:
     obs_std: Array
     reward_mean: Array
     reward_std: Array
+
+
+TERMINATION_LAYERS = 2
+"""Hidden layers of the learned termination's classifier (`model.hidden` swish units each)."""
+
+
+@struct.dataclass
+class Termination:
+    """The learned termination's classifier (`ImagineConfig.termination` "learned")."""
+
+    params: dict
+    opt_state: optax.OptState
 
 
 @struct.dataclass
@@ -80,6 +96,9 @@ class ModelState:
     """With `ModelConfig.support` set (None otherwise, so other states keep their layout):
     the lowest and highest real observation per dimension in the buffer, `([D], [D])`,
     refreshed before each fit and widened by `support`; unbounded until the first fit."""
+    termination: Termination | None = None
+    """With a learned termination (None otherwise, so other states keep their layout): the
+    classifier of the next observation, in the model's normalised units, fitted after M1."""
 
 
 def action_encoder(encoding: str, policy, action_spec) -> tuple:
@@ -112,8 +131,12 @@ class EarlyStop:
 class Dynamics:
     """Pure functions over `ModelState` for one observation/action size; holds no state."""
 
-    def __init__(self, config: ModelConfig, obs_size: int, action_size: int):
-        self.config = config
+    def __init__(
+        self, config: ModelConfig, obs_size: int, action_size: int, termination: str = "known"
+    ):
+        """`termination`: "learned" keeps a termination classifier beside M1
+        (`ImagineConfig.termination`)."""
+        self.config, self.termination = config, termination
         self.obs_size = obs_size
         self.action_size = action_size
         if config.probabilistic:
@@ -132,6 +155,7 @@ class Dynamics:
                 predict_delta=config.predict_delta,
             )
         self.optimizer = optax.adam(config.lr)
+        self.termination_net = MLP(config.hidden, 1, "swish", 0.0, TERMINATION_LAYERS, "fan_in")
 
     @property
     def ensemble(self) -> bool:
@@ -169,7 +193,62 @@ class Dynamics:
             elites=jnp.arange(self.elite_count, dtype=jnp.int32) if self.probabilistic else None,
             error_scale=jnp.ones((), jnp.float32) if self.ensemble else None,
             bounds=self._unbounded() if self.config.support is not None else None,
+            termination=self._termination_init(key),
         )
+
+    def _termination_init(self, key: Array) -> Termination | None:
+        """The classifier where it is learned, from a key of its own (M1 keeps its draws)."""
+        if self.termination != "learned":
+            return None
+        params = self.termination_net.init(
+            jax.random.fold_in(key, TERMINATION_STREAM), jnp.zeros((1, self.obs_size))
+        )
+        return Termination(params, self.optimizer.init(params))
+
+    def terminal_logit(self, params: dict, stats: Normalizer, obs: Array) -> Array:
+        """The classifier's log-odds that `obs` `[..., D]` is terminal, `[...]`."""
+        return self.termination_net.apply(params, (obs - stats.obs_mean) / stats.obs_std)[..., 0]
+
+    def is_terminal(self, state: ModelState, obs: Array) -> Array:
+        """The learned test: `obs [..., D] -> [...]`, terminal where the classifier's
+        probability passes one half."""
+        return self.terminal_logit(state.termination.params, state.stats, obs) > 0.0
+
+    def termination_loss(
+        self, params: dict, stats: Normalizer, batch: Transitions, share: Array
+    ) -> Array:
+        """The classifier's binary cross-entropy on the batch's next observations, each class
+        weighted by one half over its `share` of the buffer (terminations are rare: a hopper
+        episode ends once in hundreds of steps), so both count alike."""
+        logit = self.terminal_logit(params, stats, batch.next_obs)
+        y = batch.terminated
+        weight = jnp.where(y > 0, 0.5 / share, 0.5 / (1.0 - share))
+        return jnp.mean(weight * optax.sigmoid_binary_cross_entropy(logit, y))
+
+    def fit_termination(
+        self, state: ModelState, buffer: Buffer, key: Array
+    ) -> tuple[ModelState, Array]:
+        """`config.updates` minibatch Adam steps of the termination classifier on the buffer's
+        rows (its next observations and terminations); returns the mean loss."""
+        valid = jnp.arange(buffer.capacity) < buffer.size
+        count = jnp.maximum(buffer.size, 1).astype(jnp.float32)
+        share = jnp.where(valid, buffer.data.terminated, 0.0).sum() / count
+        share = jnp.clip(share, 1.0 / (count + 1.0), count / (count + 1.0))
+
+        def update(carry, key: Array):
+            params, opt_state = carry
+            batch = buffer_sample(buffer, key, self.config.batch_size)
+            loss, grads = jax.value_and_grad(self.termination_loss)(
+                params, state.stats, batch, share
+            )
+            updates, opt_state = self.optimizer.update(grads, opt_state, params)
+            return (optax.apply_updates(params, updates), opt_state), loss
+
+        done = state.termination
+        keys = jax.random.split(key, self.config.updates)
+        (params, opt_state), losses = jax.lax.scan(update, (done.params, done.opt_state), keys)
+        loss = losses.mean() if self.config.updates else jnp.zeros(())
+        return state.replace(termination=Termination(params, opt_state)), loss
 
     def predict_normalized(
         self, params: dict, stats: Normalizer, obs: Array, action: Array

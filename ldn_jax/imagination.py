@@ -47,7 +47,8 @@ class EnvFacts:
     """What an imagined world takes from the real env."""
 
     is_terminal: Callable
-    """`obs -> terminated`: the env's own test, applied to predicted observations."""
+    """`obs -> terminated`: the env's own test (or the model's learned one,
+    `ImagineConfig.termination`), applied to predicted observations."""
     model_action: Callable
     """Encodes the env action as the model takes it (one-hot, or the clipped vector)."""
     env_reward: Callable | None = None

@@ -77,7 +77,10 @@ class Trainer:
         if self.dynamics is not None:
             model = self.dynamics.init(k_model)
             buffer = buffer_init(
-                config.model.buffer_capacity, self.obs_size, self.model_action_size
+                config.model.buffer_capacity,
+                self.obs_size,
+                self.model_action_size,
+                terminated=config.imagine.termination == "learned",
             )
             if config.imagine.mode == "memory" and config.imagine.start != "real":
                 memory = self.learner.memory_init(config.workers)

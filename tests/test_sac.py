@@ -179,10 +179,15 @@ MBPO_RUN["model"] = {"hidden": 16, "hidden_layers": 1, "early_stop": False, "upd
 
 
 def test_mbpo_branches_start_in_r_and_fill_a_model_memory_of_the_retained_iterations():
+    """With a learned termination (`imagine.termination`): the same branches, and one check of
+    the termination at the end."""
     from ldn_jax.config import from_preset, validate
     from ldn_jax.trainer import Trainer
 
-    config = validate(from_preset("branched", **MBPO_RUN))
+    plain = Trainer(validate(from_preset("branched", **MBPO_RUN))).init_state(jax.random.key(0))
+    assert plain.model.termination is None and plain.buffer.data.terminated is None
+    run = {**MBPO_RUN, "steps": 80, "imagine": {**MBPO_RUN["imagine"], "termination": "learned"}}
+    config = validate(from_preset("branched", **run))  # 4 iterations: the last checks it
     trainer = Trainer(config)
     learner = trainer.learner
     # 2 imagined per real step: 40 rows an iteration, in whole segments of 6 branches x 1
@@ -204,6 +209,31 @@ def test_mbpo_branches_start_in_r_and_fill_a_model_memory_of_the_retained_iterat
     # 2 iterations' rows kept: the third overwrites the first's (the cursor wrapped)
     assert sizes == [42, 84, 84] and int(state.learner.imagined.cursor) == 126 % 84
     assert int(state.learner.replay.size) == 60
+    _learned_termination_ends_the_imagined_steps_it_predicts(state, step)
+
+
+def _learned_termination_ends_the_imagined_steps_it_predicts(state, step):
+    from ldn_jax.dynamics import Termination
+    from ldn_jax.envs.mujoco.tasks import TASKS
+
+    real = state.buffer
+    stored = np.asarray(real.data.terminated[: real.size])
+    truth = np.asarray(TASKS["hopper"].is_terminal(real.data.next_obs[: real.size]))
+    assert ((stored == 1.0) == truth).all()  # the real test, kept with each row
+    # a classifier sure of termination everywhere ends every imagined step
+    params = state.model.termination.params
+    last = max(params["params"])
+    sure = jax.tree.map(lambda x: x, params)
+    sure["params"][last]["bias"] = jnp.full_like(sure["params"][last]["bias"], 100.0)
+    done = Termination(sure, state.model.termination.opt_state)
+    state = state.replace(model=state.model.replace(termination=done))
+    start = int(state.learner.imagined.cursor)
+    state, metrics = step(state)
+    assert np.isfinite(float(metrics["termination_loss"]))
+    memory = state.learner.imagined
+    count = (int(memory.cursor) - start) % memory.capacity  # the ring may wrap
+    added = np.asarray(memory.data.terminated)[(start + np.arange(count)) % memory.capacity]
+    assert count > 0 and (added == 1.0).all()
 
 
 def test_a_batch_mixes_the_real_share_of_real_rows_once_the_model_memory_holds_some():
@@ -244,6 +274,9 @@ def from_preset_agent():
         ),
         (["--algo", "sac-model", "--preset", "branched", "--env", "hopper", "--stop", "ld"],
          "sac-model with stop 'ld' is sac-ldn"),
+        (["--algo", "sac-model", "--preset", "branched", "--env", "hopper",
+          "--set", "imagine.termination=maybe"],
+         "unknown termination 'maybe'; valid: known, learned"),
     ],
 )  # fmt: skip
 def test_bad_mbpo_settings_are_one_line(argv, needle):
@@ -264,3 +297,49 @@ def test_sac_model_runs_mbpos_schedule_and_sac_ldn_the_ld_draw():
     assert ldn.stop_rule == "ld" and ldn.imagine.cut == 15 and ldn.iteration_steps == 250
     cheetah = from_preset("branched", env="halfcheetah", algo="sac-model")
     assert cheetah.stop.horizon_max == 1 and cheetah.model.early_stop
+
+
+# -- a learned termination (imagine.termination "learned") --------------------------------------
+
+
+def _hopper_like(key, rows: int):
+    """Observations around hopper's healthy box (z > 0.7, |angle| < 0.2): about one in four
+    outside it."""
+    k_z, k_angle, k_rest = jax.random.split(key, 3)
+    z = jax.random.uniform(k_z, (rows, 1), minval=0.6, maxval=1.5)
+    angle = jax.random.uniform(k_angle, (rows, 1), minval=-0.25, maxval=0.25)
+    return jnp.concatenate([z, angle, jax.random.normal(k_rest, (rows, 9))], axis=-1)
+
+
+def test_a_learned_termination_weighs_both_classes_alike_and_finds_hoppers_test():
+    from ldn_jax.buffer import Transitions as Rows
+    from ldn_jax.buffer import buffer_add, buffer_init
+    from ldn_jax.config import ModelConfig
+    from ldn_jax.dynamics import Dynamics
+    from ldn_jax.envs.mujoco.tasks import TASKS
+
+    config = ModelConfig(hidden=64, updates=300, batch_size=256, lr=3e-3)
+    dynamics = Dynamics(config, 11, 3, termination="learned")
+    state = dynamics.init(jax.random.key(0))
+    # by hand: at log-odds 0 every row costs log 2, weighted 1/2 over its class's share
+    rows = Rows(jnp.zeros((4, 11)), jnp.zeros((4, 3)), jnp.zeros((4, 11)), jnp.zeros(4))
+    rows = rows.replace(terminated=jnp.array([1.0, 0.0, 0.0, 0.0]))
+    zero = jax.tree.map(jnp.zeros_like, state.termination.params)
+    loss = dynamics.termination_loss(zero, state.stats, rows, jnp.float32(0.25))
+    assert float(loss) == pytest.approx(np.log(2) * (0.5 / 0.25 + 3 * 0.5 / 0.75) / 4, rel=1e-5)
+
+    test = TASKS["hopper"].is_terminal
+    obs = _hopper_like(jax.random.key(1), 4096)
+    buffer = buffer_init(4096, 11, 3, terminated=True)
+    done = test(obs).astype(jnp.float32)
+    batch = Rows(obs, jnp.zeros((4096, 3)), obs, jnp.zeros(4096)).replace(terminated=done)
+    buffer = buffer_add(buffer, batch, jnp.ones(4096, bool))
+    assert 0.15 < float(done.mean()) < 0.35
+    fit = jax.jit(dynamics.fit_termination)
+    for i in range(8):
+        state, loss = fit(state, buffer, jax.random.key(2 + i))
+    fresh = _hopper_like(jax.random.key(99), 4096)
+    clear = (jnp.abs(fresh[:, 0] - 0.7) > 0.01) & (jnp.abs(jnp.abs(fresh[:, 1]) - 0.2) > 0.01)
+    truth, guess = np.asarray(test(fresh)), np.asarray(dynamics.is_terminal(state, fresh))
+    clear = np.asarray(clear)  # a hundredth from the box's sides or more
+    assert (guess[truth & clear]).mean() > 0.9 and (~guess[~truth & clear]).mean() > 0.9

@@ -34,8 +34,11 @@ def world_of(
     config, real = parts.config, parts.real
     rule = config.stop_rule
     world = config.model.world
+    is_terminal = real.is_terminal
+    if config.imagine.termination == "learned":
+        is_terminal = lambda obs: parts.dynamics.is_terminal(state.model, obs)
     facts = EnvFacts(
-        is_terminal=real.is_terminal,
+        is_terminal=is_terminal,
         model_action=parts.model_action,
         env_reward=real.exact_reward(config.model.env_reward),
         true_step=None if world == "model" else real.true_step,

@@ -1,11 +1,12 @@
-"""The model's stage: the real transitions into the buffer R, then M1's fit on it."""
+"""The model's stage: the real transitions into the buffer R, then M1's fit on it (and the
+termination classifier's, where it is learned)."""
 
 from __future__ import annotations
 
 import jax
 
 from ldn_jax.buffer import Transitions, buffer_add
-from ldn_jax.dynamics import EarlyStop
+from ldn_jax.dynamics import TERMINATION_STREAM, EarlyStop
 from ldn_jax.rollout import Episodes
 from ldn_jax.stages.parts import Parts, TrainState
 
@@ -24,6 +25,9 @@ def fit(parts: Parts, state: TrainState, real: Episodes, key: Array) -> tuple[Tr
         next_obs=flat(steps.next_obs),
         reward=flat(steps.reward),
     )
+    learned = parts.config.imagine.termination == "learned"
+    if learned:
+        batch = batch.replace(terminated=flat(steps.terminated).astype(batch.reward.dtype))
     buffer = buffer_add(state.buffer, batch, flat(steps.weight) > 0)
     value = None
     if parts.config.model.value_loss:
@@ -35,4 +39,7 @@ def fit(parts: Parts, state: TrainState, real: Episodes, key: Array) -> tuple[Tr
     else:
         model, loss = parts.dynamics.fit(state.model, buffer, key, value)
         fitted = {"model_loss": loss}
+    if learned:  # a key of its own: M1's fit keeps its draws
+        k_done = jax.random.fold_in(key, TERMINATION_STREAM)
+        model, fitted["termination_loss"] = parts.dynamics.fit_termination(model, buffer, k_done)
     return state.replace(model=model, buffer=buffer), fitted

@@ -77,9 +77,9 @@ class Parts:
         encode, size = action_encoder(
             config.model.action_encoding, learner.policy, real.action_spec
         )
-        dynamics = (
-            Dynamics(config.model, real.obs_size, size) if config.algorithm.uses_model else None
-        )
+        dynamics = None
+        if config.algorithm.uses_model:
+            dynamics = Dynamics(config.model, real.obs_size, size, config.imagine.termination)
         return cls(config, real, learner, dynamics, encode, size)
 
 
