@@ -10,6 +10,13 @@
   the probe), the rest what one real step costs around its updates (acting, the engine, the
   replay memory).
 
+- `mbpo_fit`: MBPO's model fit as `sac-model` and `sac-ldn` run it (`--preset branched`:
+  five 3 x 200 swish members, batch 256, fitted every 250 real steps until the held-out
+  error stalls): one minibatch step of all members, timed on a filled buffer, and what the
+  fits of a 100k-step run cost at the fewest epochs early stopping allows (patience 5: six
+  epochs per fit), each epoch one pass over R's training slots: a floor, as the first fits
+  take more.
+
 The projections multiply out: 200k real steps at a UTD of 20 are 4M updates per seed, and
 200k real steps.
 """
@@ -86,6 +93,48 @@ def sac_costs(seeds: int = 5, env_name: str = "halfcheetah", steps: int = 3000) 
         "trainer_compile_s": {f"utd{u}": round(c, 1) for u, (_, c) in seconds.items()},
         "projected_hours_200k_utd20": project(200_000, 20),
         "projected_hours_100k_utd20": project(100_000, 20),
+        "mbpo_fit": mbpo_fit_costs(seeds, env_name),
+    }
+
+
+def mbpo_fit_costs(seeds: int, env_name: str, rows: int = 20_000) -> dict:
+    """One minibatch step of the branched preset's ensemble (all members), vmapped over
+    `seeds`, on a buffer of `rows`; and the fits of a 100k-step `sac-model` run at six
+    epochs per fit, one every `iteration_steps` real steps, each epoch a pass over the
+    buffer's training slots as it then stands."""
+    from ldn_jax.buffer import HOLDOUT_EVERY, buffer_add, buffer_init
+    from ldn_jax.buffer import Transitions as Rows
+    from ldn_jax.dynamics import Dynamics, EarlyStop
+
+    config = from_preset("branched", env=env_name, algo="sac-model", seeds=seeds)
+    env, params = envs.make(env_name)
+    obs, actions = env.observation_size(params), env.action_spec(params).size
+    dynamics = Dynamics(config.model, obs, actions)
+    keys = jax.random.split(jax.random.key(0), seeds)
+    states = jax.vmap(dynamics.init)(keys)
+    data = _batch(jax.random.key(1), 1, rows, obs, actions)
+    memory = Rows(data.obs[0], data.action[0], data.next_obs[0], data.reward[0])
+    buffer = buffer_add(buffer_init(rows, obs, actions), memory, jnp.ones(rows, bool))
+    steps, members = 50, config.model.ensemble
+
+    def epoch(state, key):
+        fit = jax.vmap(dynamics._pass, (0, 0, None, None, 0, None))
+        keys = jax.random.split(key, members)
+        return fit(state.params, state.opt_state, state.stats, buffer, keys, steps)
+
+    timed = jax.jit(jax.vmap(epoch))
+    step_s = _best_seconds(timed, states, keys, repeats=3) / steps
+    every, real = config.iteration_steps, 100_000
+    epochs = EarlyStop().patience + 1
+    batches = lambda r: max(1.0, r * (1 - 1 / HOLDOUT_EVERY) / config.model.batch_size)
+    fit_steps = sum(epochs * batches(every * i) for i in range(1, real // every + 1))
+    return {
+        "what": f"{members} members of {config.model.hidden_layers} x {config.model.hidden} "
+        f"{config.model.activation} units at batch {config.model.batch_size}, vmapped over "
+        f"{seeds} seeds; fits every {every} real steps, {epochs} epochs each",
+        "ms_per_step_all_members": round(1e3 * step_s, 3),
+        "fit_steps_100k": round(fit_steps),
+        "projected_fit_hours_100k_at_least": round(fit_steps * step_s / 3600, 2),
     }
 
 

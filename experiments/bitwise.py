@@ -7,7 +7,7 @@ metrics (wall times aside) are hashed, so that two commits can be compared to th
 The runs cover each family and mode a refactor of the trainer touches: A2C, the LD draw at
 two K, PPO with imagination, a sweep, the native MuJoCo engine, a grid of runs, and the
 `branched` preset (halfcheetah's LD draw, hopper's critic-only rows, and the paper's
-M1-vs-M0 LD on a probabilistic ensemble).
+M1-vs-M0 LD on a probabilistic ensemble), and SAC alone and with MBPO's branches.
 """
 
 from __future__ import annotations
@@ -32,6 +32,8 @@ RUNS = {
     "branched-halfcheetah": "--env halfcheetah --algo ppo-ldn --preset branched --steps 4096",
     "branched-hopper": "--env hopper --algo ppo-model --preset branched --steps 4096",
     "branched-m0": "--env hopper --algo ppo-ldn --preset branched --ld m0 --steps 4096",
+    "sac": "--env hopper --algo sac --steps 1500 --set sac.learning_starts=500",
+    "sac-model": "--env hopper --algo sac-model --preset branched --steps 1000",
 }
 """Name -> the training command's flags (each run 2 seeds, quiet, into its own directory)."""
 

@@ -343,3 +343,21 @@ def test_a_learned_termination_weighs_both_classes_alike_and_finds_hoppers_test(
     truth, guess = np.asarray(test(fresh)), np.asarray(dynamics.is_terminal(state, fresh))
     clear = np.asarray(clear)  # a hundredth from the box's sides or more
     assert (guess[truth & clear]).mean() > 0.9 and (~guess[~truth & clear]).mean() > 0.9
+
+
+def test_the_side_by_side_table_reads_ours_and_sb3s_lines(tmp_path):
+    import json
+
+    from experiments.paper import sac as study
+
+    assert study.side_lines(tmp_path) == []
+    (tmp_path / "sac" / "side").mkdir(parents=True)
+    ours = {"task": "halfcheetah", "seeds": [0], "steps": 100_000, "train_seconds": 1800.0}
+    ours |= {"env_steps_per_second": 55.5, "commits": ["abc1234"], "load": "alone"}
+    (tmp_path / "sac" / "side" / "x.json").write_text(json.dumps(ours | {"gymnasium": [[5, 7]]}))
+    sb3 = {"task": "halfcheetah", "seed": 0, "steps": 100_000, "train_seconds": 2400}
+    sb3 |= {"mean": 4321.0, "steps_per_second": 41.7}
+    (tmp_path / "sac" / "sb3_sac.jsonl").write_text(json.dumps(sb3) + "\n")
+    rows = [line for line in study.side_lines(tmp_path) if line.startswith("| ours")]
+    assert rows and "| 6 |" in rows[0] and "| 56 |" in rows[0] and "alone" in rows[0]
+    assert any(line.startswith("| SB3") and "4,321" in line for line in study.side_lines(tmp_path))
