@@ -202,3 +202,20 @@ def test_diverging_seed_is_frozen_and_flagged_while_others_finish(tmp_path, monk
     assert "seed 1 K=1: non-finite" in capsys.readouterr().err
     final = [line for line in _lines(tmp_path) if line["iteration"] == 8]
     assert [line["episodes"] for line in final] == [32, 0, 32]  # seed 1 frozen from the start
+
+
+def test_a_checkpoint_without_a_settings_arrays_is_refused_not_padded(tmp_path):
+    """A checkpoint of the default layout restores into a target that wants the learned
+    termination's arrays only by failing: the partial restore (for checkpoints from before a
+    None field existed) never invents arrays."""
+    from ldn_jax.host import checkpoint
+
+    plain = from_preset("paper", env="cartpole-v1", algo="ldn", seeds=1)
+    state = Trainer(plain).init_batch()
+    checkpoint.save(tmp_path / "c", state)
+    assert checkpoint.restore(tmp_path / "c", state).model.termination is None
+    imagine = {"termination": "learned"}
+    learned = from_preset("paper", env="cartpole-v1", algo="ldn", seeds=1, imagine=imagine)
+    wants = jax.eval_shape(Trainer(learned).init_batch)
+    with pytest.raises(ValueError):
+        checkpoint.restore(tmp_path / "c", wants)

@@ -40,7 +40,28 @@ def restore(path: Path, like: TrainState) -> TrainState:
         device = jax.sharding.SingleDeviceSharding(jax.devices()[0])
         on_device = lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=device)
         target = jax.tree.map(on_device, target)
-    state = ocp.StandardCheckpointer().restore(Path(path).resolve(), target)
+    state = _restore(Path(path).resolve(), target)
     empty = lambda x, shape: jnp.zeros(shape.shape, shape.dtype) if shape.size == 0 else x
     state = jax.tree.map(empty, state, jax.eval_shape(_raw, like))
     return state.replace(key=jax.random.wrap_key_data(state.key))
+
+
+def _restore(path: Path, target: TrainState) -> TrainState:
+    """orbax's restore into `target`; a checkpoint written before a field that is None in
+    `target` existed (the state keeps its layout where a setting is off: the learned
+    termination's `ModelState.termination` and `Transitions.terminated`) lacks that field's
+    key, so it is restored without it: every array of `target` must still be on disk."""
+    try:
+        return ocp.StandardCheckpointer().restore(path, target)
+    except ValueError as error:
+        if "structures do not match" not in str(error):
+            raise
+        restore_args = ocp.checkpoint_utils.construct_restore_args(target)
+        args = ocp.args.PyTreeRestore(target, restore_args, partial_restore=True)
+        try:
+            state = ocp.PyTreeCheckpointer().restore(path, args=args)
+        except Exception:  # orbax says so in several ways: the first error says it best
+            raise error from None
+        if any(isinstance(x, jax.ShapeDtypeStruct) for x in jax.tree.leaves(state)):
+            raise error from None
+        return state
