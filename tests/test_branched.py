@@ -551,6 +551,7 @@ def _before_sections(config) -> dict:
     for old, new in ALIASES.items():
         (was, key), (now, new_key) = old.split("."), new.split(".")
         data[was][key] = data[now].pop(new_key)
+    assert data["imagine"].pop("termination") == "known"  # added since: read as its default
     for section in ("ppo", "stop", "imagine"):
         assert data.pop(section) == {}
     return data
