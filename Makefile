@@ -17,7 +17,7 @@ run: $(STAMP)
 
 # Both cores: a test file per worker (module fixtures are built once, as without xdist).
 test: $(STAMP)
-	$(PY) -m pytest -q -m "not slow" -n 2 --dist loadfile
+	$(PY) -m pytest -q -m "not slow" -n 2 --dist loadfile --durations=15
 
 test-slow: $(STAMP)
 	$(PY) -m pytest -q -m "slow"
