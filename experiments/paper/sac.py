@@ -82,7 +82,8 @@ def side_lines(results: Path) -> list[str]:
         "",
         "### Beside SB3's SAC (`baselines/sb3_sac.py`, the zoo's constants)",
         "",
-        "One seed each, on these 2 cores; greedy return in gymnasium (10 episodes). Each "
+        "One seed each, on these 2 cores; greedy return in gymnasium (ours over 10 "
+        "episodes, SB3's over its script's 5). Each "
         "row's load says what else ran on the cores: steps per second are comparable only "
         "between rows that ran under the same load.",
         "",
