@@ -2,13 +2,16 @@
 steps, halfcheetah and hopper at 200,000, seeds 5-9 (confirmatory) and 0-4 (exploratory),
 `ldn-jax --algo sac` as a user gets it.
 
-    python -m experiments.paper.sac [--tasks TASK,...] [--first-seed S] [--report]
+    python -m experiments.paper.sac [--tasks TASK,...] [--first-seed S] [--per-run N] [--report]
     python -m experiments.paper.sac --side-by-side
 
-Trains every run (one vmapped program of 5 seeds per task; resumed when interrupted, reused
-when finished; the records under `records/sac/`), then replays each seed's greedy policy in
-gymnasium (10 episodes, `ldn-jax eval`'s) into `sac/arms/TASK-sS.json` (committed, with the
-commits that trained it); `--report` rebuilds `sac/sac.json` and `sac/sac.md` from them.
+Trains every run (a vmapped program of `--per-run` seeds, one by default, so that each seed's
+record lands on its own: a 5-seed 200k run takes hours on 2 cores, and a run directory does
+not outlive the machine it trained on; resumed when interrupted, reused when finished; the
+records under `records/sac/`), then replays each seed's greedy policy in gymnasium (10
+episodes, `ldn-jax eval`'s) into `sac/arms/TASK-sac-sS+N-STEPS.json` (committed, with the
+commits that trained it); `--report` rebuilds `sac/sac.json` and `sac/sac.md` from them, the
+runs of one task, budget and label pooled into one row.
 
 `--side-by-side` trains (or reuses) ours where SB3's SAC ran on these cores
 (`baselines/sb3_sac.py`, its JSON lines kept in `sac/sb3_sac.jsonl`): halfcheetah, seed 0,
@@ -33,6 +36,9 @@ TASKS = {"inverted_pendulum": (15_000, 1000.0), "halfcheetah": (200_000, 7000.0)
 TASKS["hopper"] = (200_000, 2300.0)
 """Task -> (real steps, the plan's target for the IQM of the greedy returns)."""
 SEEDS = 5
+PER_RUN = {"inverted_pendulum": 5, "halfcheetah": 1, "hopper": 1}
+"""Seeds per vmapped run by default: the pendulum's five train in minutes; a locomotion
+seed's 200k steps take most of an hour on 2 cores, and each lands on its own."""
 CONFIRMATORY = 5
 """The plan's fresh seeds start here; 0-4 are exploratory."""
 EPISODES = 10
@@ -54,10 +60,10 @@ def run_dir(results: Path, task: str, first_seed: int, seeds: int = SEEDS, steps
     return results / "runs" / "sac" / f"{task}-sac-s{first_seed}+{seeds}-{steps}"
 
 
-def ensure(task: str, first_seed: int, results: Path, code: str) -> None:
-    """Train (or resume, or reuse) one task's run, then replay it in gymnasium."""
-    config = config_of(task, first_seed)
-    out = run_dir(results, task, first_seed)
+def ensure(task: str, first_seed: int, results: Path, code: str, seeds: int = SEEDS) -> None:
+    """Train (or resume, or reuse) one run of `seeds` seeds, then replay it in gymnasium."""
+    config = config_of(task, first_seed, seeds)
+    out = run_dir(results, task, first_seed, seeds)
     file = common.out_dir(results, "sac/arms") / f"{out.name}.json"
     cache.ensure_replayed(config, out, file, {"task": task}, (code, EPISODES))
 
@@ -112,45 +118,76 @@ def side_lines(results: Path) -> list[str]:
     return lines
 
 
-def report(results: Path) -> None:
-    rows = []
+def pooled(results: Path) -> list[dict]:
+    """The replayed runs of `sac/arms/`, pooled by task, budget and label (seeds 0-4
+    exploratory, from `CONFIRMATORY` on confirmatory), in seed order."""
+    groups: dict[tuple, list[dict]] = {}
     for file in sorted((results / "sac" / "arms").glob("*.json")):
         data = json.loads(file.read_text())
-        if "gymnasium" not in data:
-            continue
-        scores = [float(np.mean(r)) for r in data["gymnasium"]]
-        target = TASKS[data["task"]][1]
+        if "gymnasium" in data:
+            label = "confirmatory" if data["seeds"][0] >= CONFIRMATORY else "exploratory"
+            groups.setdefault((data["task"], data["steps"], label), []).append(data)
+    rows = []
+    for (task, steps, label), runs in sorted(groups.items()):
+        runs.sort(key=lambda r: r["seeds"][0])
+        seeds = [s for r in runs for s in r["seeds"]]
+        scores = [float(np.mean(g)) for r in runs for g in r["gymnasium"]]
+        commits = list(dict.fromkeys(c for r in runs for c in r["commits"]))
+        target = TASKS[task][1]
         score = stats.estimate(scores)
-        confirmatory = data["seeds"][0] >= CONFIRMATORY
         rows.append(
             {
-                **{k: v for k, v in data.items() if k != "gymnasium"},
+                "task": task,
+                "steps": steps,
+                "label": label,
+                "seeds": seeds,
                 "scores": scores,
                 "score": score,
                 "target": target,
                 "reached": sum(s >= target for s in scores),
-                "met": score["iqm"] >= target,
-                "label": "confirmatory" if confirmatory else "exploratory",
+                "complete": len(seeds) >= SEEDS,
+                "met": len(seeds) >= SEEDS and score["iqm"] >= target,
+                "runs": len(runs),
+                "env_steps_per_second": [r["env_steps_per_second"] for r in runs],
+                "seeds_per_run": [len(r["seeds"]) for r in runs],
+                "commits": commits,
             }
         )
+    return rows
+
+
+def _seeds(seeds: list[int]) -> str:
+    """5, 6, 7 -> "5-7"; gaps listed."""
+    if seeds == list(range(seeds[0], seeds[-1] + 1)):
+        return f"{seeds[0]}-{seeds[-1]}" if len(seeds) > 1 else str(seeds[0])
+    return ", ".join(map(str, seeds))
+
+
+def report(results: Path) -> None:
+    rows = pooled(results)
     out = common.out_dir(results, "sac")
     common.write_json(out / "sac.json", {"rows": rows})
     lines = [
         "## `sac` (plan: `experiments/plans/sac.md`)",
         "",
-        "Greedy return in gymnasium per seed (10 episodes); IQM [95% bootstrap interval].",
+        "Greedy return in gymnasium per seed (10 episodes); IQM [95% bootstrap interval]. "
+        "A row with fewer than the plan's 5 seeds is pending: its target is not read. "
+        "Env steps/s: per run (all of its seeds together), one figure per run.",
         "",
         "| task | steps | seeds | label | greedy return | seeds at target | target | met | "
-        "env steps/s (all seeds) | code |",
+        "env steps/s (seeds per run) | code |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
-        seeds = f"{r['seeds'][0]}-{r['seeds'][-1]}"
+        met = ("yes" if r["met"] else "no") if r["complete"] else "pending"
+        speed = ", ".join(
+            f"{v:.0f} ({n})"
+            for v, n in zip(r["env_steps_per_second"], r["seeds_per_run"], strict=True)
+        )
         lines.append(
-            f"| {r['task']} | {r['steps']:,} | {seeds} | {r['label']} | {stats.text(r['score'])} "
-            f"| {r['reached']} of {len(r['scores'])} | {r['target']:,.0f} | "
-            f"{'yes' if r['met'] else 'no'} | {r['env_steps_per_second']:.0f} | "
-            f"{', '.join(r['commits'])} |"
+            f"| {r['task']} | {r['steps']:,} | {_seeds(r['seeds'])} | {r['label']} | "
+            f"{stats.text(r['score'])} | {r['reached']} of {len(r['scores'])} | "
+            f"{r['target']:,.0f} | {met} | {speed} | {', '.join(r['commits'])} |"
         )
     lines += side_lines(results)
     (out / "sac.md").write_text("\n".join(lines) + "\n")
@@ -161,6 +198,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--tasks", default=",".join(TASKS))
     parser.add_argument("--first-seed", type=int, default=CONFIRMATORY)
+    parser.add_argument(
+        "--per-run", type=int, help="seeds per vmapped run (default: PER_RUN's, by task)"
+    )
     parser.add_argument("--report", action="store_true", help="train nothing; rebuild the report")
     parser.add_argument(
         "--side-by-side", action="store_true", help="ours where SB3's SAC ran (halfcheetah, 100k)"
@@ -171,6 +211,8 @@ def main(argv: list[str] | None = None) -> int:
     tasks = args.tasks.split(",")
     if unknown := [t for t in tasks if t not in TASKS]:
         parser.error(f"unknown task: {', '.join(unknown)}")
+    if args.per_run is not None and (args.per_run < 1 or SEEDS % args.per_run):
+        parser.error(f"--per-run must divide {SEEDS}")
     if args.side_by_side:
         common.compile_cache(args.results)
         side_by_side(args.results, cache.code_version(), args.load)
@@ -178,8 +220,10 @@ def main(argv: list[str] | None = None) -> int:
         code = cache.code_version()
         common.compile_cache(args.results)
         for task in tasks:
-            ensure(task, args.first_seed, args.results, code)
-            report(args.results)
+            per_run = args.per_run or PER_RUN[task]
+            for first in range(args.first_seed, args.first_seed + SEEDS, per_run):
+                ensure(task, first, args.results, code, per_run)
+                report(args.results)
     report(args.results)
     return 0
 
