@@ -184,7 +184,8 @@ def test_mbpo_branches_start_in_r_and_fill_a_model_memory_of_the_retained_iterat
     from ldn_jax.config import from_preset, validate
     from ldn_jax.trainer import Trainer
 
-    plain = Trainer(validate(from_preset("branched", **MBPO_RUN))).init_state(jax.random.key(0))
+    plain = Trainer(validate(from_preset("branched", **MBPO_RUN)))
+    plain = jax.eval_shape(plain.init_state, jax.random.key(0))  # the layout: no arrays built
     assert plain.model.termination is None and plain.buffer.data.terminated is None
     run = {**MBPO_RUN, "steps": 80, "imagine": {**MBPO_RUN["imagine"], "termination": "learned"}}
     config = validate(from_preset("branched", **run))  # 4 iterations: the last checks it
@@ -361,3 +362,75 @@ def test_the_side_by_side_table_reads_ours_and_sb3s_lines(tmp_path):
     rows = [line for line in study.side_lines(tmp_path) if line.startswith("| ours")]
     assert rows and "| 6 |" in rows[0] and "| 56 |" in rows[0] and "alone" in rows[0]
     assert any(line.startswith("| SB3") and "4,321" in line for line in study.side_lines(tmp_path))
+
+
+def test_the_study_pools_one_seed_runs_by_task_budget_and_label(tmp_path):
+    import json
+
+    from experiments.paper import sac as study
+
+    arms = tmp_path / "sac" / "arms"
+    arms.mkdir(parents=True)
+
+    def run(task, first, scores, commit="abc1234", steps=200_000):
+        seeds = list(range(first, first + len(scores)))
+        data = {"task": task, "seeds": seeds, "steps": steps, "commits": [commit]}
+        data |= {"env_steps_per_second": 30.0 * len(scores), "gymnasium": [[s] for s in scores]}
+        (arms / f"{task}-sac-s{first}+{len(scores)}-{steps}.json").write_text(json.dumps(data))
+
+    run("hopper", 6, [2400.0])
+    run("hopper", 5, [2500.0], commit="def5678")
+    run("hopper", 0, [100.0])  # exploratory: a row of its own
+    (rows,) = [r for r in study.pooled(tmp_path) if r["label"] == "confirmatory"]
+    assert rows["seeds"] == [5, 6] and rows["scores"] == [2500.0, 2400.0]
+    assert rows["commits"] == ["def5678", "abc1234"] and not rows["complete"]
+    assert not rows["met"] and rows["reached"] == 2  # two seeds are no verdict
+    for first, score in zip((7, 8, 9), (2300.0, 100.0, 2600.0), strict=True):
+        run("hopper", first, [score])
+    (done,) = [r for r in study.pooled(tmp_path) if r["label"] == "confirmatory"]
+    assert done["complete"] and done["seeds"] == [5, 6, 7, 8, 9] and done["runs"] == 5
+    assert done["met"] == (done["score"]["iqm"] >= 2300.0)
+    study.report(tmp_path)
+    table = (tmp_path / "sac" / "sac.md").read_text()
+    assert "| hopper | 200,000 | 5-9 | confirmatory |" in table
+    assert "| hopper | 200,000 | 0 | exploratory |" in table and "pending" in table
+
+
+def test_the_rule_study_tests_once_every_seed_is_in_and_corrects_by_holm(tmp_path):
+    import json
+
+    from experiments.paper import sac_rules as study
+
+    arms = tmp_path / "sac-rules" / "arms"
+    arms.mkdir(parents=True)
+    base = {"hopper": {"sac": 1000.0, "sac-model": 2000.0, "sac-ldn": 3000.0}}
+    base["halfcheetah"] = {"sac": 5000.0, "sac-model": 5000.0, "sac-ldn": 5000.0}
+
+    def write(task, arm, seed):
+        data = {"task": task, "arm": arm, "seeds": [seed], "steps": study.STEPS}
+        data |= {"commits": ["abc1234"], "train_seconds": 3600.0, "imagined_steps": 20_000}
+        data |= {"env_steps": study.STEPS, "gymnasium": [[base[task][arm] + seed, 0.0]]}
+        (arms / f"{task}-{arm}-s{seed}.json").write_text(json.dumps(data))
+
+    seeds = range(study.FIRST_SEED, study.FIRST_SEED + study.SEEDS)
+    for task in study.TASKS:
+        for arm in study.ARMS:
+            for seed in seeds:
+                if (task, arm, seed) != ("halfcheetah", "sac-ldn", 14):
+                    write(task, arm, seed)
+    assert study.tests(study.rows_of(tmp_path)) is None  # one seed missing: no verdict
+    write("halfcheetah", "sac-ldn", 14)
+    rows = study.rows_of(tmp_path)
+    hopper = {r["arm"]: r for r in rows if r["task"] == "hopper"}
+    assert hopper["sac-ldn"]["scores"][0] == (3010.0 + 0.0) / 2 and len(rows) == 6
+    assert hopper["sac"]["imagined_per_real"] == 0.2
+    found = study.tests(rows)
+    assert len(found) == 6
+    # hopper separates cleanly: p = 1/252 each, Holm x6 = 0.024 < 0.05; halfcheetah's tie
+    # at the same offsets by seed cannot
+    first = found[0]
+    assert (first["task"], first["a"], first["b"]) == ("hopper", "sac-ldn", "sac-model")
+    assert abs(first["p"] - 1 / 252) < 1e-9 and first["shown"]
+    assert not any(t["shown"] for t in found if t["task"] == "halfcheetah")
+    study.report(tmp_path)
+    assert "not shown at 5 seeds" in (tmp_path / "sac-rules" / "sac-rules.md").read_text()

@@ -1,0 +1,178 @@
+"""Which rule should set MBPO's rollout length, under `experiments/plans/sac-rules.md`: `sac`,
+`sac-model` (MBPO's schedule) and `sac-ldn` (the LD draw) on hopper and halfcheetah at 100k
+real steps, UTD 1, seeds 10-14, one seed per run.
+
+    python -m experiments.paper.sac_rules [--tasks TASK,...] [--arms ARM,...] [--report]
+
+Trains every run (resumed when interrupted, reused when finished; a finished run leaves its
+record under `records/sac-rules/`), replays each seed's greedy policy in gymnasium (10
+episodes) into `sac-rules/arms/TASK-ARM-sS.json` (committed, with the commits that trained it
+and the steps it imagined), and rebuilds `sac-rules/sac-rules.json` and `.md`: each arm's IQM,
+and the plan's six one-sided Mann-Whitney tests with Holm's correction once every seed of
+both tasks is in.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from experiments.paper import cache, common
+from ldn_jax.config import Config, from_preset, validate
+from ldn_jax.host import stats
+
+TASKS = ("hopper", "halfcheetah")
+ARMS = ("sac", "sac-model", "sac-ldn")
+COMPARISONS = (("sac-ldn", "sac-model"), ("sac-ldn", "sac"), ("sac-model", "sac"))
+STEPS = 100_000
+FIRST_SEED, SEEDS = 10, 5
+EPISODES = 10
+ALPHA = 0.05
+
+
+def config_of(task: str, arm: str, seed: int, steps: int = STEPS) -> Config:
+    return validate(
+        from_preset("branched", env=task, algo=arm, seeds=1, first_seed=seed, steps=steps)
+    )
+
+
+def run_dir(results: Path, task: str, arm: str, seed: int, steps: int = STEPS) -> Path:
+    return results / "runs" / "sac-rules" / f"{task}-{arm}-s{seed}+1-{steps}"
+
+
+def _imagined(out: Path) -> dict:
+    summary = json.loads((out / "summary.json").read_text())
+    return {"imagined_steps": summary["imagined_steps"], "env_steps": summary["env_steps"]}
+
+
+def ensure(task: str, arm: str, seed: int, results: Path, code: str) -> None:
+    """Train (or resume, or reuse) one seed's run, then replay it in gymnasium."""
+    out = run_dir(results, task, arm, seed)
+    file = common.out_dir(results, "sac-rules/arms") / f"{task}-{arm}-s{seed}.json"
+    config, labels = config_of(task, arm, seed), {"task": task, "arm": arm}
+    cache.ensure_replayed(config, out, file, labels, (code, EPISODES), _imagined)
+
+
+def rows_of(results: Path) -> list[dict]:
+    """Per task and arm: the replayed seeds of the plan, their greedy returns and IQM."""
+    found: dict[tuple[str, str], list[dict]] = {}
+    for file in sorted((results / "sac-rules" / "arms").glob("*.json")):
+        data = json.loads(file.read_text())
+        if "gymnasium" in data and data["steps"] == STEPS:
+            found.setdefault((data["task"], data["arm"]), []).append(data)
+    rows = []
+    for task in TASKS:
+        for arm in ARMS:
+            runs = sorted(found.get((task, arm), []), key=lambda r: r["seeds"][0])
+            if not runs:
+                continue
+            scores = [sum(g) / len(g) for r in runs for g in r["gymnasium"]]
+            imagined = sum(r.get("imagined_steps", 0) for r in runs)
+            real = sum(r.get("env_steps", 0) for r in runs)
+            rows.append(
+                {
+                    "task": task,
+                    "arm": arm,
+                    "seeds": [s for r in runs for s in r["seeds"]],
+                    "scores": scores,
+                    "score": stats.estimate(scores),
+                    "imagined_per_real": imagined / real if real else None,
+                    "train_seconds": [r["train_seconds"] for r in runs],
+                    "commits": list(dict.fromkeys(c for r in runs for c in r["commits"])),
+                }
+            )
+    return rows
+
+
+def tests(rows: list[dict]) -> list[dict] | None:
+    """The plan's six comparisons with Holm's correction; None until every arm of both tasks
+    has all its seeds."""
+    from scipy import stats as scipy_stats
+
+    scores = {(r["task"], r["arm"]): r["scores"] for r in rows if len(r["seeds"]) == SEEDS}
+    out = []
+    for task in TASKS:
+        for a, b in COMPARISONS:
+            if (task, a) not in scores or (task, b) not in scores:
+                return None
+            x, y = scores[task, a], scores[task, b]
+            p = float(scipy_stats.mannwhitneyu(x, y, alternative="greater").pvalue)
+            out.append({"task": task, "a": a, "b": b, "p": p, **stats.improvement(x, y)})
+    for test, adjusted in zip(out, stats.holm([t["p"] for t in out]), strict=True):
+        test["holm_p"] = adjusted
+        test["shown"] = adjusted < ALPHA
+    return out
+
+
+def section(rows: list[dict], found: list[dict] | None) -> str:
+    lines = [
+        "## Which rule sets MBPO's rollout length (plan: `experiments/plans/sac-rules.md`)",
+        "",
+        f"`--preset branched`, UTD 1, {STEPS:,} real steps, seeds {FIRST_SEED}-"
+        f"{FIRST_SEED + SEEDS - 1} (confirmatory), one seed per run. Greedy return in "
+        "gymnasium (10 episodes per seed); IQM [95% bootstrap interval].",
+        "",
+        "| task | arm | seeds | greedy return | imagined per real step | hours per seed | code |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        hours = sum(r["train_seconds"]) / len(r["train_seconds"]) / 3600
+        ratio = "–" if r["imagined_per_real"] is None else f"{r['imagined_per_real']:.1f}"
+        lines.append(
+            f"| {r['task']} | `{r['arm']}` | {len(r['seeds'])} of {SEEDS} | "
+            f"{stats.text(r['score'])} | {ratio} | {hours:.2f} | {', '.join(r['commits'])} |"
+        )
+    lines.append("")
+    if found is None:
+        lines.append("The tests wait for every seed of every arm on both tasks.")
+        return "\n".join(lines) + "\n"
+    lines += [
+        "One-sided Mann-Whitney U, 5 against 5; Holm over the six tests.",
+        "",
+        "| task | comparison | P(improvement) | p | Holm p | verdict |",
+        "|---|---|---|---|---|---|",
+    ]
+    for t in found:
+        verdict = "shown" if t["shown"] else "not shown at 5 seeds"
+        lines.append(
+            f"| {t['task']} | `{t['a']}` > `{t['b']}` | {stats.improvement_text(t)} | "
+            f"{t['p']:.3g} | {t['holm_p']:.3g} | {verdict} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def report(results: Path) -> None:
+    rows = rows_of(results)
+    found = tests(rows)
+    out = common.out_dir(results, "sac-rules")
+    common.write_json(out / "sac-rules.json", {"rows": rows, "tests": found})
+    (out / "sac-rules.md").write_text(section(rows, found))
+    print(f"wrote {out}/sac-rules.json and sac-rules.md")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--tasks", default=",".join(TASKS))
+    parser.add_argument("--arms", default=",".join(ARMS))
+    parser.add_argument("--report", action="store_true", help="train nothing; rebuild the report")
+    parser.add_argument("--results", type=Path, default=common.RESULTS)
+    args = parser.parse_args(argv)
+    tasks, arms = args.tasks.split(","), args.arms.split(",")
+    if unknown := [t for t in tasks if t not in TASKS] + [a for a in arms if a not in ARMS]:
+        parser.error(f"unknown task or arm: {', '.join(unknown)}")
+    if not args.report:
+        code = cache.code_version()
+        common.compile_cache(args.results)
+        for task in tasks:
+            for seed in range(FIRST_SEED, FIRST_SEED + SEEDS):
+                for arm in arms:
+                    ensure(task, arm, seed, args.results, code)
+                    report(args.results)
+    report(args.results)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(common.script(main))
