@@ -360,7 +360,8 @@ class Dynamics:
         )
 
     def _unbounded(self) -> tuple[Array, Array]:
-        return jnp.full(self.obs_size, -jnp.inf), jnp.full(self.obs_size, jnp.inf)
+        inf = jnp.float32(jnp.inf)  # strongly typed, as the fitted box: a chunk keeps its layout
+        return jnp.full(self.obs_size, -inf), jnp.full(self.obs_size, inf)
 
     def buffer_bounds(self, buffer: Buffer) -> tuple[Array, Array]:
         """The box of the buffer's valid observations (before and after each step), widened

@@ -343,3 +343,31 @@ def test_first_seed_starts_what_the_same_seeds_of_a_larger_batch_start():
 def _rule(ld_stop: bool):
     """The LD draw (ldn) or no stop (a2c-model)."""
     return stop_rule(StopConfig(), "ld" if ld_stop else "none")
+
+
+@pytest.mark.parametrize(
+    ("preset", "env", "algo"),
+    [
+        ("paper", "cartpole-v1", "ldn"),
+        ("branched", "hopper", "ppo-ldn"),  # a learned log std, the model's support box
+        ("branched", "hopper", "sac-model"),
+    ],
+)
+def test_an_iteration_returns_the_state_layout_it_was_given(preset, env, algo):
+    """Shapes, dtypes and weak types: a leaf that changes between the initial state and an
+    iteration's output (a weakly typed constant at init) makes a `jax.jit` of the iteration
+    compile again on its second call, with the first call's output (27 s in the MBPO
+    branches test; the host loop's ahead-of-time chunk accepts either)."""
+    trainer = Trainer(from_preset(preset, env=env, algo=algo, seeds=1, steps=1000))
+    start = jax.eval_shape(trainer.init_state, jax.random.key(0))
+    after = jax.eval_shape(lambda s: trainer.iteration(s, jnp.float32(1.0))[0], start)
+    layout = lambda t: [(x.shape, x.dtype, x.weak_type) for x in jax.tree.leaves(t)]
+    assert jax.tree.structure(after) == jax.tree.structure(start)
+    changed = [
+        jax.tree_util.keystr(path)
+        for (path, _), a, b in zip(
+            jax.tree_util.tree_leaves_with_path(start), layout(start), layout(after), strict=True
+        )
+        if a != b
+    ]
+    assert changed == []

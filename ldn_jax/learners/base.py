@@ -306,7 +306,8 @@ class ActorCritic:
             "critic": self.critic.init(k_critic, dummy),
         }
         if getattr(self.policy, "log_std", False):
-            params["log_std"] = jnp.full((self.policy.size,), self.config.log_std_init)
+            log_std = jnp.float32(self.config.log_std_init)  # strongly typed, as after an update
+            params["log_std"] = jnp.full((self.policy.size,), log_std)
         if self.config.normalize_obs:
             params["obs_norm"] = {
                 "mean": jnp.zeros((self.obs_size,)),
