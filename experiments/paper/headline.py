@@ -141,21 +141,8 @@ def rows_of(results: Path, seeds: int, first: int, steps: int) -> list[dict]:
 
 def tests(rows: list[dict]) -> list[dict] | None:
     """The plan's comparisons with Holm's correction; None until every one can be made."""
-    from scipy import stats as scipy_stats
-
     scores = {(r["env"], r["arm"]): r["scores"] for r in rows}
-    out = []
-    for env in ENVS:
-        for a, b in COMPARISONS:
-            if (env, a) not in scores or (env, b) not in scores:
-                return None
-            x, y = scores[env, a], scores[env, b]
-            p = float(scipy_stats.mannwhitneyu(x, y, alternative="greater").pvalue)
-            out.append({"env": env, "a": a, "b": b, "p": p, **stats.improvement(x, y)})
-    for test, adjusted in zip(out, stats.holm([t["p"] for t in out]), strict=True):
-        test["holm_p"] = adjusted
-        test["shown"] = adjusted < ALPHA
-    return out
+    return stats.planned_tests(scores, ENVS, COMPARISONS, ALPHA)
 
 
 def section(rows: list[dict], found: list[dict] | None) -> str:

@@ -89,21 +89,8 @@ def rows_of(results: Path) -> list[dict]:
 def tests(rows: list[dict]) -> list[dict] | None:
     """The plan's six comparisons with Holm's correction; None until every arm of both tasks
     has all its seeds."""
-    from scipy import stats as scipy_stats
-
     scores = {(r["task"], r["arm"]): r["scores"] for r in rows if len(r["seeds"]) == SEEDS}
-    out = []
-    for task in TASKS:
-        for a, b in COMPARISONS:
-            if (task, a) not in scores or (task, b) not in scores:
-                return None
-            x, y = scores[task, a], scores[task, b]
-            p = float(scipy_stats.mannwhitneyu(x, y, alternative="greater").pvalue)
-            out.append({"task": task, "a": a, "b": b, "p": p, **stats.improvement(x, y)})
-    for test, adjusted in zip(out, stats.holm([t["p"] for t in out]), strict=True):
-        test["holm_p"] = adjusted
-        test["shown"] = adjusted < ALPHA
-    return out
+    return stats.planned_tests(scores, TASKS, COMPARISONS, ALPHA, group="task")
 
 
 def section(rows: list[dict], found: list[dict] | None) -> str:

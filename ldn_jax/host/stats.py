@@ -150,6 +150,33 @@ def holm(pvalues: Sequence[float]) -> list[float]:
     return out.tolist()
 
 
+def planned_tests(
+    scores: dict[tuple[str, str], Sequence[float]],
+    groups: Sequence[str],
+    comparisons: Sequence[tuple[str, str]],
+    alpha: float = 0.05,
+    group: str = "env",
+) -> list[dict] | None:
+    """A plan's one-sided comparisons "a > b" in each group (task), `scores[group, arm]`:
+    Mann-Whitney U (`alternative="greater"`), P(improvement) with its interval, and Holm's
+    correction over all of them (`shown` where the adjusted p is below `alpha`). None until
+    every comparison can be made. Each test is keyed by `group`'s name."""
+    from scipy import stats
+
+    out = []
+    for name in groups:
+        for a, b in comparisons:
+            if (name, a) not in scores or (name, b) not in scores:
+                return None
+            x, y = scores[name, a], scores[name, b]
+            p = float(stats.mannwhitneyu(x, y, alternative="greater").pvalue)
+            out.append({group: name, "a": a, "b": b, "p": p, **improvement(x, y)})
+    for test, adjusted in zip(out, holm([t["p"] for t in out]), strict=True):
+        test["holm_p"] = adjusted
+        test["shown"] = adjusted < alpha
+    return out
+
+
 def text(value: dict, digits: int = 0) -> str:
     """`estimate`'s result as a table cell: `512 [480, 540]` (IQM [95% interval])."""
     if value["iqm"] is None:
