@@ -302,8 +302,10 @@ class SACLearner:
 
     def update(self, state: SACRun, segment, key: Array) -> tuple[SACRun, dict]:
         """Add the segment's live rows `[n, W]` to the replay memory, then make `utd` updates
-        per live row once the memory holds `learning_starts` (none before: the losses read
-        0 there), each on a batch drawn by `sample`."""
+        per row of the segment once the memory holds `learning_starts` (none before: the
+        losses read 0 there), each on a batch drawn by `sample`. The count is the scan's
+        length, so it is fixed: every row counts, live or not (under the `steps` schedule
+        every row is live)."""
         replay = _add(state.replay, segment)
         updates = self.own.utd * segment.weight.size
         sample = lambda key: self.sample(replay, getattr(state, "imagined", None), key)
