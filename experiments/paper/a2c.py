@@ -144,13 +144,7 @@ def report(results: Path) -> None:
 
 def _scored(folder: Path) -> list[dict]:
     """The files in `folder` replayed in gymnasium, each with its per-seed scores and IQM."""
-    rows = []
-    for file in sorted(folder.glob("*.json")):
-        data = json.loads(file.read_text())
-        if "gymnasium" in data:
-            scores = [float(np.mean(r)) for r in data["gymnasium"]]
-            rows.append({**data, "scores": scores, "score": stats.estimate(scores)})
-    return rows
+    return [{**data, "score": stats.estimate(data["scores"])} for data in cache.replayed(folder)]
 
 
 CONFIRM_SEEDS = 10

@@ -364,3 +364,25 @@ def ensure_replayed(
             **(extra(out) if extra else {}),
         },
     )
+
+
+def replayed(folder: Path) -> list[dict]:
+    """The files `ensure_replayed` wrote in `folder` whose runs are replayed, in name order,
+    each with `scores`: its seeds' mean greedy returns."""
+    found = []
+    for file in sorted(folder.glob("*.json")):
+        data = json.loads(file.read_text())
+        if "gymnasium" in data:
+            found.append({**data, "scores": [float(np.mean(g)) for g in data["gymnasium"]]})
+    return found
+
+
+def pool(runs: list[dict]) -> dict:
+    """Runs of one row (from `replayed`; a seed each, or several) pooled in seed order: their
+    seeds, scores and the commits that trained them, each named once."""
+    runs = sorted(runs, key=lambda r: r["seeds"][0])
+    return {
+        "seeds": [s for r in runs for s in r["seeds"]],
+        "scores": [s for r in runs for s in r["scores"]],
+        "commits": list(dict.fromkeys(c for r in runs for c in r["commits"])),
+    }

@@ -122,17 +122,14 @@ def pooled(results: Path) -> list[dict]:
     """The replayed runs of `sac/arms/`, pooled by task, budget and label (seeds 0-4
     exploratory, from `CONFIRMATORY` on confirmatory), in seed order."""
     groups: dict[tuple, list[dict]] = {}
-    for file in sorted((results / "sac" / "arms").glob("*.json")):
-        data = json.loads(file.read_text())
-        if "gymnasium" in data:
-            label = "confirmatory" if data["seeds"][0] >= CONFIRMATORY else "exploratory"
-            groups.setdefault((data["task"], data["steps"], label), []).append(data)
+    for data in cache.replayed(results / "sac" / "arms"):
+        label = "confirmatory" if data["seeds"][0] >= CONFIRMATORY else "exploratory"
+        groups.setdefault((data["task"], data["steps"], label), []).append(data)
     rows = []
     for (task, steps, label), runs in sorted(groups.items()):
         runs.sort(key=lambda r: r["seeds"][0])
-        seeds = [s for r in runs for s in r["seeds"]]
-        scores = [float(np.mean(g)) for r in runs for g in r["gymnasium"]]
-        commits = list(dict.fromkeys(c for r in runs for c in r["commits"]))
+        pooled = cache.pool(runs)
+        seeds, scores = pooled["seeds"], pooled["scores"]
         target = TASKS[task][1]
         score = stats.estimate(scores)
         rows.append(
@@ -150,7 +147,7 @@ def pooled(results: Path) -> list[dict]:
                 "runs": len(runs),
                 "env_steps_per_second": [r["env_steps_per_second"] for r in runs],
                 "seeds_per_run": [len(r["seeds"]) for r in runs],
-                "commits": commits,
+                "commits": pooled["commits"],
             }
         )
     return rows

@@ -58,9 +58,8 @@ def ensure(task: str, arm: str, seed: int, results: Path, code: str) -> None:
 def rows_of(results: Path) -> list[dict]:
     """Per task and arm: the replayed seeds of the plan, their greedy returns and IQM."""
     found: dict[tuple[str, str], list[dict]] = {}
-    for file in sorted((results / "sac-rules" / "arms").glob("*.json")):
-        data = json.loads(file.read_text())
-        if "gymnasium" in data and data["steps"] == STEPS:
+    for data in cache.replayed(results / "sac-rules" / "arms"):
+        if data["steps"] == STEPS:
             found.setdefault((data["task"], data["arm"]), []).append(data)
     rows = []
     for task in TASKS:
@@ -68,19 +67,19 @@ def rows_of(results: Path) -> list[dict]:
             runs = sorted(found.get((task, arm), []), key=lambda r: r["seeds"][0])
             if not runs:
                 continue
-            scores = [sum(g) / len(g) for r in runs for g in r["gymnasium"]]
+            pooled = cache.pool(runs)
             imagined = sum(r.get("imagined_steps", 0) for r in runs)
             real = sum(r.get("env_steps", 0) for r in runs)
             rows.append(
                 {
                     "task": task,
                     "arm": arm,
-                    "seeds": [s for r in runs for s in r["seeds"]],
-                    "scores": scores,
-                    "score": stats.estimate(scores),
+                    "seeds": pooled["seeds"],
+                    "scores": pooled["scores"],
+                    "score": stats.estimate(pooled["scores"]),
                     "imagined_per_real": imagined / real if real else None,
                     "train_seconds": [r["train_seconds"] for r in runs],
-                    "commits": list(dict.fromkeys(c for r in runs for c in r["commits"])),
+                    "commits": pooled["commits"],
                 }
             )
     return rows
