@@ -185,15 +185,8 @@ def section(rows: list[dict], found: list[dict] | None) -> str:
         "One-sided Mann-Whitney, 10 seeds a side; Holm's correction over all 16; "
         f"family-wise alpha {ALPHA}.",
         "",
-        "| env | comparison | P(A > B) | p | Holm p | verdict |",
-        "|---|---|---|---|---|---|",
     ]
-    for t in found:
-        verdict = "A beats B" if t["shown"] else "not shown at 10 seeds"
-        lines.append(
-            f"| {t['env']} | `{t['a']}` > `{t['b']}` | {stats.improvement_text(t)} | "
-            f"{t['p']:.3g} | {t['holm_p']:.3g} | {verdict} |"
-        )
+    lines += stats.tests_table(found, "env", "P(A > B)", ("A beats B", "not shown at 10 seeds"))
     return "\n".join([*lines, ""])
 
 

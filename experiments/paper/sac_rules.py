@@ -117,15 +117,8 @@ def section(rows: list[dict], found: list[dict] | None) -> str:
     lines += [
         "One-sided Mann-Whitney U, 5 against 5; Holm over the six tests.",
         "",
-        "| task | comparison | P(improvement) | p | Holm p | verdict |",
-        "|---|---|---|---|---|---|",
     ]
-    for t in found:
-        verdict = "shown" if t["shown"] else "not shown at 5 seeds"
-        lines.append(
-            f"| {t['task']} | `{t['a']}` > `{t['b']}` | {stats.improvement_text(t)} | "
-            f"{t['p']:.3g} | {t['holm_p']:.3g} | {verdict} |"
-        )
+    lines += stats.tests_table(found, "task", "P(improvement)", ("shown", "not shown at 5 seeds"))
     return "\n".join(lines) + "\n"
 
 

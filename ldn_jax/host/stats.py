@@ -177,6 +177,23 @@ def planned_tests(
     return out
 
 
+def tests_table(
+    found: Sequence[dict], group: str, probability: str, verdicts: tuple[str, str]
+) -> list[str]:
+    """`planned_tests`' result as a markdown table: a row per test, `group` its first column,
+    `probability` the heading of P(improvement)'s, `verdicts` (shown, not shown) the last."""
+    lines = [
+        f"| {group} | comparison | {probability} | p | Holm p | verdict |",
+        "|---|---|---|---|---|---|",
+    ]
+    for t in found:
+        lines.append(
+            f"| {t[group]} | `{t['a']}` > `{t['b']}` | {improvement_text(t)} | "
+            f"{t['p']:.3g} | {t['holm_p']:.3g} | {verdicts[0] if t['shown'] else verdicts[1]} |"
+        )
+    return lines
+
+
 def text(value: dict, digits: int = 0) -> str:
     """`estimate`'s result as a table cell: `512 [480, 540]` (IQM [95% interval])."""
     if value["iqm"] is None:
