@@ -25,6 +25,7 @@ from ldn_jax.host.settings import UsageError
 from ldn_jax.host.training import train
 from ldn_jax.imagination import StepView, macura_threshold, scheduled_horizon, stop_rule
 from ldn_jax.trainer import Trainer
+from tests.conftest import optimised
 
 BRANCHED = {
     "ld": "ensemble",
@@ -305,7 +306,8 @@ def branched_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("branched")
     config = _config(imagine={"real_share": 0.25})
     # Compiled bitwise, so that the split over two devices below can be held to it.
-    summary = train(config, out, checkpoint_every=1, quiet=True, bitwise=True)
+    with optimised():  # the `optimized` tests below hold other programs to its bits
+        summary = train(config, out, checkpoint_every=1, quiet=True, bitwise=True)
     return config, out, summary
 
 

@@ -142,3 +142,22 @@ def test_model_fit_lowers_held_out_mse(activation):
     # M0 never moves.
     for a, b in zip(jax.tree.leaves(fitted.frozen), jax.tree.leaves(state.frozen), strict=True):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
+@pytest.mark.optimized
+def test_an_optimized_test_compiles_with_xlas_optimisations():
+    import os
+
+    assert not jax.config.values["jax_disable_most_optimizations"]
+    assert os.environ.get("JAX_DISABLE_MOST_OPTIMIZATIONS") in (None, "0")
+
+
+def test_the_others_compile_without_them_where_the_session_chose_so():
+    import os
+
+    from tests.conftest import FAST
+
+    if not os.environ.get(FAST):
+        pytest.skip("the caller chose JAX_DISABLE_MOST_OPTIMIZATIONS for the whole session")
+    assert jax.config.values["jax_disable_most_optimizations"]
+    assert os.environ["JAX_DISABLE_MOST_OPTIMIZATIONS"] == "1"

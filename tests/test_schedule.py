@@ -20,6 +20,7 @@ from ldn_jax.host.run_dir import read_config as read_run_config
 from ldn_jax.host.training import Interrupted, train
 from ldn_jax.rollout import Batch, Player, play_batch
 from ldn_jax.trainer import Trainer
+from tests.conftest import optimised
 from tests.test_resume import StopAfter, _lines
 from tests.test_scale import _run
 
@@ -128,9 +129,10 @@ def test_a_run_is_deterministic(played):
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory):
     out = tmp_path_factory.mktemp("steps-reference")
-    summary = train(
-        from_preset("paper", **CONFIG), out, checkpoint_every=1, quiet=True, bitwise=True
-    )
+    with optimised():  # the `optimized` tests below hold other programs to its bits
+        summary = train(
+            from_preset("paper", **CONFIG), out, checkpoint_every=1, quiet=True, bitwise=True
+        )
     return out, summary
 
 

@@ -114,6 +114,7 @@ def compile_chunk(
     repeated run in the same process: `train` called again, a notebook, the tests).
     """
     key = (trainer.config, mesh, bitwise, _signature(states, mesh), _signature(k, mesh))
+    key += (_optimisations(),)
     if reuse and key in _programs:
         _programs.move_to_end(key)
         return _programs[key], 0.0, 0.0
@@ -129,11 +130,17 @@ def compile_chunk(
 def evaluator(trainer: Trainer, mesh=None, bitwise: bool = False):
     """`trainer.batched_evaluate(mesh, bitwise)`, the same jitted function (and so the same
     compiled programs) for an equal config within the process."""
-    key = ("evaluate", trainer.config, mesh, bitwise)
+    key = ("evaluate", trainer.config, mesh, bitwise, _optimisations())
     if key in _programs:
         _programs.move_to_end(key)
         return _programs[key]
     return _keep(key, trainer.batched_evaluate(mesh, bitwise))
+
+
+def _optimisations() -> bool:
+    """Whether XLA compiles with its optimisations now (`jax_disable_most_optimizations`
+    unset): a program compiled under the other setting is another program."""
+    return not jax.config.values.get("jax_disable_most_optimizations", False)
 
 
 def _keep(key, program):
