@@ -11,11 +11,11 @@ so both lowerings give the same bits (tests/test_prng.py).
 It pays most for a2c, where the draws are a larger share of the work (docs/defaults.md).
 
 It applies only inside `written_out(...)`, to the programs the trainer compiles
-(`Trainer.batched_chunk`, `Trainer.batched_evaluate`): the draws keep their bits, but XLA can
-compile the code around them differently. A single-env CartPole rollout, jitted on its own,
-came out 1 ulp apart from its vmapped twin under the written-out lowering (and equal under
-JAX's), so every other program keeps JAX's lowering. If this JAX lacks the rules it uses,
-nothing changes (`INSTALLED` is False).
+(`Trainer.batched_chunk`, `Trainer.batched_evaluate`, `Trainer.init_batch`): the draws keep
+their bits, but XLA can compile the code around them differently. A single-env CartPole
+rollout, jitted on its own, came out 1 ulp apart from its vmapped twin under the written-out
+lowering (and equal under JAX's), so every other program keeps JAX's lowering. If this JAX
+lacks the rules it uses, nothing changes (`INSTALLED` is False).
 
 `permutation`: `jax.random.permutation` (PPO's shuffle, every epoch), through sorts XLA:CPU
 runs with a plain comparison; the same permutation (tests/test_prng.py).

@@ -78,6 +78,21 @@ def test_the_trainers_chunk_is_written_out_and_computes_what_jaxs_lowering_compu
         np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.parametrize(
+    ("preset", "env", "algo"),
+    [("branched", "hopper", "sac-model"), ("paper", "cartpole-v0", "ldn")],
+)
+def test_the_initial_states_are_written_out_and_are_what_jaxs_lowering_gives(preset, env, algo):
+    # sac-model: five nets, an ensemble and the workers' resets; ldn: M1, M0 and the buffer
+    trainer = Trainer(from_preset(preset, env=env, algo=algo, seeds=2))
+    jitted = jax.jit(trainer._init_batch)
+    loops = lambda lowered: lowered.as_text().count("stablehlo.while")
+    assert loops(prng.written_out(jitted).lower()) < loops(jitted.lower())
+    written, own = values(trainer.init_batch()), values(jitted())
+    for a, b in zip(written, own, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
 @pytest.mark.parametrize("n", [1, 2, 800, 1_625, 1_626, 5_000])
 def test_permutation_is_jaxs_permutation_bit_for_bit(n):
     # 1,626 is the first size JAX shuffles in two rounds of sorts.
