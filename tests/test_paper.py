@@ -1207,3 +1207,25 @@ def test_a_curve_whose_seeds_end_at_different_episode_counts_is_drawn_at_their_m
     plt.close(fig)
     np.testing.assert_allclose(x, [8, 16, 20, 24])  # not seed 0's 16, 16: a vertical line
     np.testing.assert_allclose(y, [1.0, 2.0, 2.5, 3.0])
+
+
+def test_a_replayed_runs_file_names_only_the_commits_that_trained_what_it_holds(
+    tmp_path, monkeypatch
+):
+    class Started(Exception):
+        pass
+
+    def start(config, out):
+        raise Started  # training would start here: the file is written before it
+
+    monkeypatch.setattr(cache, "ensure_run", start)
+    config = from_preset("paper", env="inverted_pendulum", algo="a2c")
+    file = tmp_path / "arm.json"
+    out = tmp_path / "runs" / "arm"  # empty: a new machine, or a run cleared for another config
+    for resumable, commits in ((False, ["new5678"]), (True, ["old1234", "new5678"])):
+        file.write_text(json.dumps({"task": "x", "commits": ["old1234"]}))
+        if resumable:
+            monkeypatch.setattr(cache, "_resumable", lambda config, out: True)
+        with pytest.raises(Started):
+            cache.ensure_replayed(config, out, file, {"task": "x"}, ("new5678", 1))
+        assert json.loads(file.read_text())["commits"] == commits

@@ -157,6 +157,14 @@ def _recorded(out: Path) -> Path | None:
     return record if record is not None and RunDir(record).summary_file.is_file() else None
 
 
+def _resumable(config: Config, out: Path) -> bool:
+    """`out` holds an interrupted run of `config`, which `ensure_run` resumes."""
+    run = RunDir(out)
+    if not run.holds_run():
+        return False
+    return _same_config(json.loads(run.config_file.read_text()), config)
+
+
 def has_finished(out: Path) -> bool:
     """A finished run is in `out`, or its record is there in its place."""
     return RunDir(out).is_finished() or _recorded(out) is not None
@@ -341,9 +349,12 @@ def ensure_replayed(
     code, episodes = run
     kept = json.loads(file.read_text()) if file.exists() else {}
     commits = kept.get("commits", [])
-    if not has_finished(out) and code not in commits:
-        commits = [*commits, code]
-        write_json(file, {**kept, **labels, "commits": commits})
+    if not has_finished(out):
+        if not _resumable(config, out):  # from scratch: what earlier commits trained is gone
+            commits = []
+        if code not in commits:
+            commits = [*commits, code]
+            write_json(file, {**kept, **labels, "commits": commits})
     summary = ensure_run(config, out)
     if kept.get("train_seconds") == summary["train_seconds"] and "gymnasium" in kept:
         return
