@@ -17,8 +17,8 @@ marked `optimized`: it compares the bits of two different programs, which the op
 decide, so it gets them back (in this process and in the commands it starts), as does a
 module fixture whose run such a test holds to its bits (`optimised`). Measured 2026-12-07,
 `make test` on an idle 2-core machine: 776 s, against 969 s with the optimisations on for
-every test. A caller who sets the variable keeps it everywhere, and the guard below fails the
-`optimized` tests.
+every test. `slow` tests (`make test-slow`) get the optimisations back too. A caller who sets
+the variable keeps it everywhere, and the guard below fails the `optimized` tests.
 """
 
 from __future__ import annotations
@@ -95,7 +95,10 @@ def optimised():
 
 @pytest.fixture(autouse=True)
 def _optimisations(request):
-    if request.node.get_closest_marker("optimized"):
+    """`optimized` tests, and `slow` ones (learning tests: they run long enough that the
+    optimisations pay), compile with XLA's optimisations."""
+    node = request.node
+    if node.get_closest_marker("optimized") or node.get_closest_marker("slow"):
         with optimised():
             yield
     else:
