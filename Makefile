@@ -19,8 +19,9 @@ run: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest -q -m "not slow" -n 2 --dist loadfile --durations=15
 
+# With XLA's optimisations (tests/conftest.py): learning tests run long enough that they pay.
 test-slow: $(STAMP)
-	$(PY) -m pytest -q -m "slow"
+	JAX_DISABLE_MOST_OPTIMIZATIONS=0 $(PY) -m pytest -q -m "slow"
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

@@ -17,8 +17,9 @@ marked `optimized`: it compares the bits of two different programs, which the op
 decide, so it gets them back (in this process and in the commands it starts), as does a
 module fixture whose run such a test holds to its bits (`optimised`). Measured 2026-12-07,
 `make test` on an idle 2-core machine: 776 s, against 969 s with the optimisations on for
-every test. `slow` tests (`make test-slow`) get the optimisations back too. A caller who sets
-the variable keeps it everywhere, and the guard below fails the `optimized` tests.
+every test. A caller who sets the variable keeps it everywhere: `make test-slow` sets it to 0
+(learning tests run long enough that the optimisations pay), and a caller who sets it to 1
+has the guard below fail the `optimized` tests.
 """
 
 from __future__ import annotations
@@ -74,8 +75,8 @@ def optimised():
     """XLA's optimisations on within the block (this process and the commands it starts),
     where the session turned them off; nothing otherwise. For a test marked `optimized`
     (below, automatically) and for a module fixture whose run such a test compares bits with."""
-    if not os.environ.get(FAST):
-        yield
+    if not os.environ.get(FAST) or os.environ["JAX_DISABLE_MOST_OPTIMIZATIONS"] == "0":
+        yield  # a caller's setting, or already on (a nested use)
         return
     import jax
 
@@ -95,10 +96,7 @@ def optimised():
 
 @pytest.fixture(autouse=True)
 def _optimisations(request):
-    """`optimized` tests, and `slow` ones (learning tests: they run long enough that the
-    optimisations pay), compile with XLA's optimisations."""
-    node = request.node
-    if node.get_closest_marker("optimized") or node.get_closest_marker("slow"):
+    if request.node.get_closest_marker("optimized"):
         with optimised():
             yield
     else:
@@ -110,6 +108,7 @@ def pytest_runtest_setup(item):
     optimisations decide: under JAX_DISABLE_MOST_OPTIMIZATIONS it would check another
     compiler's bits (a two-pass `make test`, the rest without optimisations, was tried and
     was slower: 15:17 against 12:41)."""
-    chosen = os.environ.get("JAX_DISABLE_MOST_OPTIMIZATIONS") and not os.environ.get(FAST)
+    value = os.environ.get("JAX_DISABLE_MOST_OPTIMIZATIONS", "0").lower()
+    chosen = value in ("y", "yes", "t", "true", "on", "1") and not os.environ.get(FAST)
     if item.get_closest_marker("optimized") and chosen:
         pytest.fail("an `optimized` test needs XLA's optimisations: unset the variable")

@@ -1222,10 +1222,11 @@ def test_a_replayed_runs_file_names_only_the_commits_that_trained_what_it_holds(
     config = from_preset("paper", env="inverted_pendulum", algo="a2c")
     file = tmp_path / "arm.json"
     out = tmp_path / "runs" / "arm"  # empty: a new machine, or a run cleared for another config
+    old = {"task": "x", "commits": ["old1234"], "gymnasium": [[1.0]], "train_seconds": 9.0}
     for resumable, commits in ((False, ["new5678"]), (True, ["old1234", "new5678"])):
-        file.write_text(json.dumps({"task": "x", "commits": ["old1234"]}))
-        if resumable:
-            monkeypatch.setattr(cache, "_resumable", lambda config, out: True)
+        file.write_text(json.dumps(old))
+        monkeypatch.setattr(cache, "_resumable", lambda config, out, r=resumable: r)
         with pytest.raises(Started):
             cache.ensure_replayed(config, out, file, {"task": "x"}, ("new5678", 1))
-        assert json.loads(file.read_text())["commits"] == commits
+        # the earlier run's results go: they are not of the run that trains now
+        assert json.loads(file.read_text()) == {"task": "x", "commits": commits}

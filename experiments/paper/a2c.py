@@ -37,7 +37,9 @@ EPISODES = 10
 STEPS = 300_000
 """The screening budget; the chosen arms run again at 1M (`--steps 1000000`)."""
 
-_OBS = {"agent.normalize_obs": True}
+_OBS = {"agent.normalize_obs": True, "agent.normalize_reward": False}
+"""Rewards as they come, said outright: hopper's default standardises them since 2026-12-07,
+and each arm keeps the config it trained under."""
 _STEPS = {**_OBS, "schedule": "steps"}
 _NETS = {
     **_STEPS,

@@ -157,6 +157,14 @@ def _recorded(out: Path) -> Path | None:
     return record if record is not None and RunDir(record).summary_file.is_file() else None
 
 
+def _reusable(config: Config, out: Path) -> bool:
+    """`ensure_run` reuses a finished run of `config` in `out`, or its record."""
+    run = RunDir(out)
+    if run.is_finished():
+        return _same_config(json.loads(run.config_file.read_text()), config)
+    return _recorded_summary(config, out) is not None
+
+
 def _resumable(config: Config, out: Path) -> bool:
     """`out` holds an interrupted run of `config`, which `ensure_run` resumes."""
     run = RunDir(out)
@@ -349,12 +357,13 @@ def ensure_replayed(
     code, episodes = run
     kept = json.loads(file.read_text()) if file.exists() else {}
     commits = kept.get("commits", [])
-    if not has_finished(out):
+    if not _reusable(config, out):
         if not _resumable(config, out):  # from scratch: what earlier commits trained is gone
             commits = []
-        if code not in commits:
-            commits = [*commits, code]
-            write_json(file, {**kept, **labels, "commits": commits})
+        if code not in commits or "gymnasium" in kept:
+            commits = [*dict.fromkeys([*commits, code])]
+            kept = {}  # the results of a run that is not the one about to train
+            write_json(file, {**labels, "commits": commits})
     summary = ensure_run(config, out)
     if kept.get("train_seconds") == summary["train_seconds"] and "gymnasium" in kept:
         return
