@@ -73,7 +73,7 @@ def ensure_run(config: Config, out: Path) -> dict:
         return summary
     out.mkdir(parents=True, exist_ok=True)
     with run.hold():
-        resume = run.holds_run() and _same_config(json.loads(run.config_file.read_text()), config)
+        resume = run.holds_run() and _of(run, config)
         if resume and run.is_finished():
             _keep_record(config, out)
             return run.read_summary()
@@ -157,20 +157,23 @@ def _recorded(out: Path) -> Path | None:
     return record if record is not None and RunDir(record).summary_file.is_file() else None
 
 
+def _of(run: RunDir, config: Config) -> bool:
+    """The run held in `run` is of `config`."""
+    return _same_config(json.loads(run.config_file.read_text()), config)
+
+
 def _reusable(config: Config, out: Path) -> bool:
     """`ensure_run` reuses a finished run of `config` in `out`, or its record."""
     run = RunDir(out)
     if run.is_finished():
-        return _same_config(json.loads(run.config_file.read_text()), config)
+        return _of(run, config)
     return _recorded_summary(config, out) is not None
 
 
 def _resumable(config: Config, out: Path) -> bool:
     """`out` holds an interrupted run of `config`, which `ensure_run` resumes."""
     run = RunDir(out)
-    if not run.holds_run():
-        return False
-    return _same_config(json.loads(run.config_file.read_text()), config)
+    return run.holds_run() and _of(run, config)
 
 
 def has_finished(out: Path) -> bool:

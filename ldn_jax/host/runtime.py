@@ -113,8 +113,8 @@ def compile_chunk(
     shapes is returned as it is, neither traced nor compiled, with 0 seconds (a resumed or
     repeated run in the same process: `train` called again, a notebook, the tests).
     """
-    key = (trainer.config, mesh, bitwise, _signature(states, mesh), _signature(k, mesh))
-    key += (_optimisations(),)
+    key = (trainer.config, mesh, bitwise, _optimisations())
+    key += (_signature(states, mesh), _signature(k, mesh))
     if reuse and key in _programs:
         _programs.move_to_end(key)
         return _programs[key], 0.0, 0.0
