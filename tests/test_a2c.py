@@ -126,3 +126,41 @@ def test_the_study_refuses_an_algorithm_outside_the_plan(capsys):
         study.main(["--confirm", "ppo"])
     assert stop.value.code == 2
     assert "unknown algorithm for --confirm: ppo" in capsys.readouterr().err
+
+
+def test_the_a2c_plan_tests_once_its_runs_are_in_and_reads_targets_and_imagination(tmp_path):
+    import json
+
+    from experiments.paper import a2c as study
+
+    confirm = tmp_path / "a2c" / "confirm"
+    confirm.mkdir(parents=True)
+    base = {"hopper": {"a2c": 1100.0, "a2c-model": 800.0, "ldn": 2000.0}}
+    base["halfcheetah"] = {"a2c": 3000.0, "a2c-model": 3000.0, "ldn": 3000.0}
+
+    def write(task, algo):
+        seeds = list(range(study.CONFIRM_SEEDS, study.CONFIRM_SEEDS + study.SEEDS))
+        data = {"task": task, "algo": algo, "seeds": seeds, "steps": 1000, "commits": ["abc"]}
+        data["gymnasium"] = [[base[task][algo] + s, base[task][algo] + s] for s in seeds]
+        (confirm / f"{task}-{algo}-s10+5-1000.json").write_text(json.dumps(data))
+
+    for task in study.CONFIRM_TASKS:
+        for algo in study.CONFIRM_ALGOS:
+            if (task, algo) != ("hopper", "a2c-model"):
+                write(task, algo)
+    rows = [{**r, "imagined_per_real": 0.01} for r in study._scored(confirm)]
+    assert study.confirm_tests(rows) is None
+    waiting = "\n".join(study.confirm_section(rows, None))
+    assert "wait for: hopper `a2c-model`" in waiting
+    assert "3,041: not met" in waiting and "1,000: met" in waiting
+    assert "1.00% (under 5% of its real steps)" in waiting
+    write("hopper", "a2c-model")
+    found = study.confirm_tests(study._scored(confirm))
+    assert [(t["task"], t["a"], t["b"]) for t in found] == [
+        (task, "ldn", b) for task in study.CONFIRM_TASKS for b in ("a2c", "a2c-model")
+    ]
+    # hopper separates cleanly (p = 1/252, Holm x4 < 0.05); halfcheetah's ties cannot
+    assert [t["shown"] for t in found] == [False, False, True, True]
+    study.report(tmp_path)
+    text = (tmp_path / "a2c" / "a2c.md").read_text()
+    assert "halfcheetah `ldn` vs `a2c`: yes" in text and "hopper `ldn` vs `a2c`: no" in text

@@ -123,23 +123,11 @@ def report(results: Path) -> None:
             f"| {r['task']} | {r['steps']:,} | {seeds} | {r['arm']} | {stats.text(r['score'])} "
             f"| {each} | {r['env_steps_per_second']:,.0f} | {', '.join(r['commits'])} |"
         )
-    confirmed = _scored(results / "a2c" / "confirm")
-    lines += [
-        "",
-        "The plan's runs on fresh seeds (confirmatory, `experiments/plans/a2c.md`; K = 1, the "
-        "task defaults):",
-        "",
-        "| task | algorithm | steps | seeds | greedy return | per seed | code |",
-        "|---|---|---|---|---|---|---|",
-        *(
-            f"| {r['task']} | {r['algo']} | {r['steps']:,} | {r['seeds'][0]}-{r['seeds'][-1]} "
-            f"| {stats.text(r['score'])} | {', '.join(f'{s:,.0f}' for s in r['scores'])} "
-            f"| {', '.join(r['commits'])} |"
-            for r in confirmed
-        ),
-    ]
+    confirmed = [{**r, **_imagined(results, r)} for r in _scored(results / "a2c" / "confirm")]
+    found = confirm_tests(confirmed)
+    lines += ["", *confirm_section(confirmed, found)]
     out = common.out_dir(results, "a2c")
-    common.write_json(out / "a2c.json", {"rows": rows, "confirmatory": confirmed})
+    common.write_json(out / "a2c.json", {"rows": rows, "confirmatory": confirmed, "tests": found})
     (out / "a2c.md").write_text("\n".join(lines) + "\n")
     print(f"wrote {out}/a2c.json and a2c.md")
 
@@ -152,6 +140,96 @@ def _scored(folder: Path) -> list[dict]:
 CONFIRM_SEEDS = 10
 """The plan's fresh seeds (`experiments/plans/a2c.md`): 10-14."""
 CONFIRM_ALGOS = ("a2c", "a2c-model", "ldn")
+CONFIRM_TASKS = ("halfcheetah", "hopper")
+"""The plan's tasks with targets and tests (walker2d's `a2c` is stated only)."""
+CONFIRM_TARGETS = {("halfcheetah", "a2c"): 3041.0, ("hopper", "a2c"): 1000.0}
+"""The plan's targets for the IQM of the greedy returns (halfcheetah's: the zoo's A2C)."""
+COMPARISONS = (("ldn", "a2c"), ("ldn", "a2c-model"))
+"""The plan's one-sided tests "a > b" on each of `CONFIRM_TASKS`, Holm over all four."""
+ALPHA = 0.05
+FEW_IMAGINED = 0.05
+"""A model-based run imagining fewer steps than this share of its real ones is said to."""
+
+
+def _imagined(results: Path, row: dict) -> dict:
+    """The steps a confirm run imagined per real step, from its run's summary (or record)."""
+    name = f"{row['task']}-{row['algo']}-s{row['seeds'][0]}+{len(row['seeds'])}-{row['steps']}"
+    summary = cache.finished_summary(results / "runs" / "a2c" / "confirm" / name)
+    if summary is None or not summary.get("env_steps"):
+        return {"imagined_per_real": None}
+    return {"imagined_per_real": summary["imagined_steps"] / summary["env_steps"]}
+
+
+def confirm_tests(rows: list[dict]) -> list[dict] | None:
+    """The plan's four tests with Holm's correction; None until every run they read has its
+    5 seeds replayed."""
+    scores = {(r["task"], r["algo"]): r["scores"] for r in rows if len(r["seeds"]) == SEEDS}
+    return stats.planned_tests(scores, CONFIRM_TASKS, COMPARISONS, ALPHA, group="task")
+
+
+def _imagined_text(row: dict) -> str:
+    share = row["imagined_per_real"]
+    if row["algo"] == "a2c" or share is None:
+        return "–"
+    few = f" (under {FEW_IMAGINED:.0%} of its real steps)" if share < FEW_IMAGINED else ""
+    return f"{share:.2%}{few}"
+
+
+def _target_text(row: dict) -> str:
+    target = CONFIRM_TARGETS.get((row["task"], row["algo"]))
+    if target is None:
+        return "–"
+    met = "met" if row["score"]["iqm"] >= target else "not met"
+    return f"{target:,.0f}: {met}"
+
+
+def confirm_section(rows: list[dict], found: list[dict] | None) -> list[str]:
+    """The plan's runs, targets and tests as markdown lines."""
+    lines = [
+        "The plan's runs on fresh seeds (confirmatory, `experiments/plans/a2c.md`; K = 1, the "
+        "task defaults). Imagined: the steps the model imagined per real step, all seeds "
+        "together.",
+        "",
+        "| task | algorithm | steps | seeds | greedy return | per seed | target | imagined "
+        "| code |",
+        "|---|---|---|---|---|---|---|---|---|",
+        *(
+            f"| {r['task']} | {r['algo']} | {r['steps']:,} | {r['seeds'][0]}-{r['seeds'][-1]} "
+            f"| {stats.text(r['score'])} | {', '.join(f'{s:,.0f}' for s in r['scores'])} "
+            f"| {_target_text(r)} | {_imagined_text(r)} | {', '.join(r['commits'])} |"
+            for r in rows
+        ),
+        "",
+    ]
+    if found is None:
+        missing = [
+            f"{task} `{algo}`"
+            for task in CONFIRM_TASKS
+            for algo in CONFIRM_ALGOS
+            if not any(r["task"] == task and r["algo"] == algo for r in rows)
+        ]
+        return [*lines, f"The plan's tests wait for: {', '.join(missing)}."]
+    lines += [
+        "The plan's tests: one-sided Mann-Whitney U, 5 against 5 seeds; Holm over the four. "
+        'P(improvement) with its 95% bootstrap interval; "level" where that interval '
+        "contains 0.5.",
+        "",
+        *stats.tests_table(found, "task", "P(improvement)", ("shown", "not shown at 5 seeds")),
+        "",
+        "Level: "
+        + "; ".join(
+            f"{t['task']} `{t['a']}` vs `{t['b']}`: {'yes' if _level(t) else 'no'}" for t in found
+        )
+        + ".",
+    ]
+    return lines
+
+
+def _level(test: dict) -> bool:
+    if test["ci95"] is None:
+        return False
+    low, high = test["ci95"]
+    return low <= 0.5 <= high
 
 
 def confirm(task: str, algo: str, results: Path, code: str) -> None:
