@@ -121,6 +121,63 @@ def test_shadow_rollouts_of_an_untrained_model():
     assert summary["imagined"]["one_step_error"]["ld"]["spearman"] is None  # LD is constant
 
 
+def test_policy_rollouts_and_the_shadow_rewards_on_cartpole():
+    """CartPole pays 1 per step: a real episode's discounted return is 1 + ... + gamma^(L-1),
+    exactly 1 at gamma 0; the shadow's true rewards are the env's for each imagined step."""
+    for gamma in (0.0, 0.9):
+        config = from_preset("paper", env="cartpole-v0", algo="a2c-model", seeds=1)
+        config = dataclasses.replace(config, agent=dataclasses.replace(config.agent, gamma=gamma))
+        trainer = Trainer(config)
+        state = trainer.init_state(jax.random.key(0))
+        value, real, imagined = jax.device_get(
+            jax.jit(cal.policy_rollouts, static_argnums=(0, 3))(
+                trainer, state, jax.random.key(1), 5
+            )
+        )
+        assert value.shape == real.shape == imagined.shape == (5,)
+        if gamma == 0.0:
+            np.testing.assert_array_equal(real, 1.0)
+        else:  # at least 8 steps before a pole falls from rest, at most the step limit
+            assert ((real > (1 - gamma**8) / (1 - gamma)) & (real < 1 / (1 - gamma))).all()
+    steps = jax.device_get(
+        jax.jit(cal.shadow_rollouts, static_argnums=(0, 3))(
+            trainer, state, jax.random.key(1), 4, 1.0
+        )
+    )
+    np.testing.assert_array_equal(steps.true_reward, 1.0)
+    assert (steps.step_size > 0).all() and steps.reward.shape == steps.live.shape
+
+
+def test_the_a2c_model_diagnosis_bins_imagined_steps_by_their_index():
+    from experiments.paper import a2c_model
+
+    seeds, length, episodes = 1, 1000, 2
+    shape = (seeds, length, episodes)
+    ones = np.ones(shape)
+    steps = cal.ShadowSteps(
+        **{name: np.zeros(shape) for name in cal.ShadowSteps.__dataclass_fields__}
+    )
+    steps = steps.replace(
+        live=ones.astype(bool),
+        real_live=ones.astype(bool),
+        one_step_error=ones,
+        step_size=2 * ones,
+        compounding_error=np.arange(length)[None, :, None] * ones,
+        reward=ones,
+        true_reward=-ones,
+    )
+    bins = a2c_model.bin_summary(steps)
+    assert [b["share"] for b in bins] == pytest.approx([0.001, 0.004, 0.015, 0.08, 0.9])
+    assert [b["relative_one_step_error"] for b in bins] == [0.5] * 5
+    assert [b["drift"] for b in bins] == [0.0, 2.5, 12.0, 59.5, 549.5]  # index - 1, median
+    assert bins[0]["reward"] == 1.0 and bins[0]["true_reward"] == -1.0
+    # an episode that ended (predicted termination) at step 3 counts in no later bin
+    ended = steps.replace(live=np.arange(length)[None, :, None] < 3 * ones)
+    assert [b["share"] for b in a2c_model.bin_summary(ended)] == pytest.approx(
+        [1 / 3, 2 / 3, 0, 0, 0]
+    )
+
+
 @pytest.fixture(scope="module")
 def smoke(tmp_path_factory):
     """Every script at the smoke scale, in one process (`all.py`), into a fresh directory.

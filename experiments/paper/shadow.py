@@ -54,6 +54,13 @@ class ShadowSteps:
     """The reward's term of sigma2 (sigma2 minus the next state's)."""
     one_step_error: Array
     compounding_error: Array
+    step_size: Array
+    """||env(s_t, a_t) - s_t||: how far the real env moves from the imagined state in one
+    step (the scale `one_step_error` is read against)."""
+    reward: Array
+    """The imagined step's reward as the learner sees it (M1's prediction)."""
+    true_reward: Array
+    """The real env's reward for the same step from the imagined state."""
     disagreement: Array
     """Ensemble disagreement: 1/2 the variance over members, reduced over output dims and
     scaled as the run reads eq. 3; zero without an ensemble."""
@@ -122,7 +129,7 @@ def shadow_rollouts(
         sigma2_reward = scale * 0.5 * jnp.square(predicted[..., -1] - frozen[..., -1]) / outputs
         stop = stop_draw(k_stop, stop_probability(sigma2, k))
         env_keys = jax.random.split(k_env, episodes)
-        true_next = step(env_keys, from_obs(imagined), action, params)[0]
+        true_next, _, true_reward = step(env_keys, from_obs(imagined), action, params)[:3]
         real_next, real, _, real_terminated, _, _ = step(env_keys, real, action, params)
         next_obs = predicted[..., :-1]
         if ensemble is None:
@@ -138,6 +145,9 @@ def shadow_rollouts(
             sigma2_reward=sigma2_reward,
             one_step_error=jnp.linalg.norm(next_obs - true_next, axis=-1),
             compounding_error=jnp.linalg.norm(next_obs - real_next, axis=-1),
+            step_size=jnp.linalg.norm(true_next - imagined, axis=-1),
+            reward=predicted[..., -1],
+            true_reward=true_reward,
             disagreement=spread,
             ensemble_ld=p_continue,
             live=live,
@@ -159,6 +169,50 @@ def shadow_rollouts(
     init = (obs, real, ones, ones, ones, ones)
     keys = jax.random.split(k_play, trainer.max_steps)
     return jax.lax.scan(body, init, keys)[1]
+
+
+def policy_rollouts(
+    trainer: Trainer, state: TrainState, key: Array, episodes: int
+) -> tuple[Array, Array, Array]:
+    """`episodes` episodes of one seed's sampled policy from fresh initial states, played in
+    the real env and, from the same initial states, in its M1 (the a2c-model rule: until
+    predicted termination or the step limit).
+
+    Returns the critic's value of the initial states `[N]` (in standardised units under
+    `agent.normalize_reward`), and each episode's discounted return (the run's gamma) in the
+    real env and in M1 `[N]`: what the critic's targets are built from on real episodes,
+    and on imagined ones."""
+    env, params, learner = trainer.env, trainer.env_params, trainer.learner
+    gamma = trainer.config.agent.gamma
+    step = jax.vmap(env.step, (0, 0, 0, None))
+    k_real, k_imagined, k_reset = jax.random.split(key, 3)
+    obs, real = jax.vmap(env.reset, (0, None))(jax.random.split(k_reset, episodes), params)
+    value = learner.value(state.learner.params, obs)
+
+    def real_body(carry, key):
+        obs, real, live, discount, total = carry
+        k_act, k_env = jax.random.split(key)
+        action = learner.act(state.learner.params, k_act, obs)
+        obs, real, reward, terminated, _, _ = step(
+            jax.random.split(k_env, episodes), real, action, params
+        )
+        total = total + jnp.where(live, discount * reward, 0.0)
+        return (obs, real, live & ~terminated, discount * gamma, total), None
+
+    def imagined_body(carry, key):
+        obs, live, discount, total = carry
+        action = learner.act(state.learner.params, key, obs)
+        predicted = _predict(trainer, state.model.params, obs, trainer.model_action(action))
+        next_obs, reward = predicted[..., :-1], predicted[..., -1]
+        total = total + jnp.where(live, discount * reward, 0.0)
+        live = live & ~env.is_terminal(next_obs, params)
+        return (next_obs, live, discount * gamma, total), None
+
+    ones, zeros = jnp.ones((episodes,), bool), jnp.zeros((episodes,))
+    keys = lambda k: jax.random.split(k, trainer.max_steps)
+    real_return = jax.lax.scan(real_body, (obs, real, ones, 1.0, zeros), keys(k_real))[0][-1]
+    imagined_return = jax.lax.scan(imagined_body, (obs, ones, 1.0, zeros), keys(k_imagined))
+    return value, real_return, imagined_return[0][-1]
 
 
 def fit_ensemble(
