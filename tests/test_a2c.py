@@ -161,6 +161,10 @@ def test_the_a2c_plan_tests_once_its_runs_are_in_and_reads_targets_and_imaginati
     ]
     # hopper separates cleanly (p = 1/252, Holm x4 < 0.05); halfcheetah's ties cannot
     assert [t["shown"] for t in found] == [False, False, True, True]
+    line = {"task": "hopper", "seed": 0, "steps": 1000, "train_seconds": 10, "mean": 733.4}
+    (tmp_path / "a2c" / study.SB3_RUNS).write_text(json.dumps(line) + "\n")
     study.report(tmp_path)
     text = (tmp_path / "a2c" / "a2c.md").read_text()
+    # beside SB3's run: ours at the same budget on the fresh seeds (1,110 ... 1,114 each)
+    assert "| hopper | 1,000 | 0 | 733 | 10 | 100 | – | – | 1,112 [" in text
     assert "halfcheetah `ldn` vs `a2c`: yes" in text and "hopper `ldn` vs `a2c`: no" in text

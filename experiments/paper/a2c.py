@@ -126,10 +126,58 @@ def report(results: Path) -> None:
     confirmed = [{**r, **_imagined(results, r)} for r in _scored(results / "a2c" / "confirm")]
     found = confirm_tests(confirmed)
     lines += ["", *confirm_section(confirmed, found)]
+    lines += sb3_lines(results, rows, confirmed)
     out = common.out_dir(results, "a2c")
     common.write_json(out / "a2c.json", {"rows": rows, "confirmatory": confirmed, "tests": found})
     (out / "a2c.md").write_text("\n".join(lines) + "\n")
     print(f"wrote {out}/a2c.json and a2c.md")
+
+
+SB3_RUNS = "sb3_a2c.jsonl"
+"""SB3's A2C under the zoo's settings, one JSON line per task and seed as
+`baselines/sb3_a2c.py TASK SEED STEPS` prints it (with the SB3 version and the load beside it
+added when kept), in `a2c/`."""
+DEFAULT_ARMS = {"halfcheetah": "obs-norm", "hopper": "obs-reward"}
+"""Each task's arm that is its A2C-family default today (seeds 0-4 chose it)."""
+
+
+def sb3_lines(results: Path, rows: list[dict], confirmed: list[dict]) -> list[str]:
+    """SB3's A2C runs (`SB3_RUNS`) beside ours at the task default and the same budget."""
+    file = results / "a2c" / SB3_RUNS
+    if not file.exists():
+        return []
+    runs = [json.loads(line) for line in file.read_text().splitlines() if line.strip()]
+    lines = [
+        "",
+        "### Beside SB3's A2C (`baselines/sb3_a2c.py`, the zoo's MuJoCo settings)",
+        "",
+        "SB3's: one seed per row, greedy return in gymnasium over its script's 5 episodes. "
+        "Ours: `--algo a2c` at the task's default, IQM over 5 seeds (10 episodes each) at "
+        "the same budget, on the seeds that chose the default (exploratory) and on the plan's "
+        "fresh ones. Steps per second are comparable only between rows run under the same "
+        "load.",
+        "",
+        "| task | steps | SB3 seed | SB3 greedy return | SB3 training s | SB3 env steps/s | "
+        "load | ours, seeds 0-4 | ours, seeds 10-14 |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in sorted(runs, key=lambda r: (r["task"], r["steps"], r["seed"])):
+        arm = DEFAULT_ARMS.get(r["task"])
+        chose = [
+            x for x in rows if (x["task"], x["arm"], x["steps"]) == (r["task"], arm, r["steps"])
+        ]
+        fresh = [
+            x
+            for x in confirmed
+            if (x["task"], x["algo"], x["steps"]) == (r["task"], "a2c", r["steps"])
+        ]
+        ours = lambda found: stats.text(found[0]["score"]) if found else "–"
+        lines.append(
+            f"| {r['task']} | {r['steps']:,} | {r['seed']} | {r['mean']:,.0f} | "
+            f"{r['train_seconds']:,.0f} | {r['steps'] / r['train_seconds']:,.0f} | "
+            f"{r.get('load', '–')} | {ours(chose)} | {ours(fresh)} |"
+        )
+    return lines
 
 
 def _scored(folder: Path) -> list[dict]:
