@@ -73,12 +73,16 @@ ARMS: dict[str, dict[str, object]] = {
     "sb3": {**_W1, "agent.normalize_reward": True},
     "n5-reward": {**_N5, "agent.normalize_reward": True},
     "obs-reward": {**_OBS, "agent.normalize_reward": True},
+    "w16": {**_OBS, "workers": 16},
+    "w32": {**_OBS, "workers": 32},
 }
 """Arm -> fields over the task's defaults (`--set` names). "sb3" is SB3's A2C under the zoo's
 VecNormalize in our knobs: one env, 5 steps per update, 64 x 64 tanh nets with orthogonal
 init and a state-free log std from 0, PyTorch's RMSProp (decay 0.99, eps 1e-5) at 7e-4 under
 a 0.5 clip, observations and rewards standardised, no entropy bonus; "n5-reward" is the same
-on 8 workers; "obs-reward" is "obs-norm" with the rewards standardised too."""
+on 8 workers; "obs-reward" is "obs-norm" with the rewards standardised too; "w16" and "w32"
+are "obs-norm" on 16 and 32 workers (fewer updates of more rows for the same real steps: what
+an accelerator's default could use, if it learns as well)."""
 
 
 def config_of(task: str, arm: str, first_seed: int, steps: int) -> Config:
