@@ -148,6 +148,26 @@ def test_policy_rollouts_and_the_shadow_rewards_on_cartpole():
     assert (steps.step_size > 0).all() and steps.reward.shape == steps.live.shape
 
 
+def test_the_shadow_predicts_under_the_models_normaliser():
+    """A run that standardises its model's data imagines through `ModelState.stats`; the
+    shadow's predictions must too (identity stats are not the run's model)."""
+    config = from_preset("paper", env="cartpole-v0", algo="ldn", seeds=1, model={"normalize": True})
+    trainer = Trainer(config)
+    state = trainer.init_state(jax.random.key(0))
+    stats = state.model.stats.replace(
+        obs_mean=state.model.stats.obs_mean + 0.5, obs_std=2 * state.model.stats.obs_std
+    )
+    obs, onehot = jnp.ones((3, trainer.obs_size)), trainer.model_action(jnp.array([0, 1, 0]))
+    dynamics, params = trainer.dynamics, state.model.params
+    shadow = cal._predict(trainer, params, stats, obs, onehot)
+    next_obs, reward = dynamics.predict(params, obs, onehot, stats)
+    np.testing.assert_allclose(shadow[:, :-1], next_obs, rtol=1e-6)
+    np.testing.assert_allclose(shadow[:, -1], reward, rtol=1e-6)
+    own = cal._predict(trainer, params, stats, obs, onehot, normalized=True)
+    plain = cal._predict(trainer, params, state.model.stats, obs, onehot)
+    assert not np.allclose(own, shadow) and not np.allclose(plain, shadow)
+
+
 def test_the_a2c_model_diagnosis_bins_imagined_steps_by_their_index():
     from experiments.paper import a2c_model
 

@@ -84,10 +84,40 @@ def diagnose(out: Path, key: jax.Array | None = None) -> dict:
     )
     return {
         "shadow_episodes": SHADOW_EPISODES,
+        "fit": [
+            fit_error(trainer, jax.tree.map(lambda x, s=s: x[s], states))
+            for s in range(config.seeds)
+        ],
         "bins": bin_summary(steps),
         "value": [float(v.mean()) for v in value],
         "real_return": [float(r.mean()) for r in real],
         "imagined_return": [float(r.mean()) for r in imagined],
+    }
+
+
+BUFFER_ROWS = 2000
+"""Rows of the final buffer R (evenly spaced over what it holds) `fit_error` reads."""
+
+
+def fit_error(trainer, state) -> dict:
+    """M1 on the real transitions it was last fitted to (one seed's final state): its
+    one-step error relative to the real step (median) and its reward's absolute error beside
+    the rewards' own size (medians)."""
+    data, size = state.buffer.data, int(state.buffer.size)
+    rows = np.linspace(0, size - 1, min(BUFFER_ROWS, size)).astype(int)
+    obs, action, next_obs, reward = (
+        np.asarray(x)[rows] for x in (data.obs, data.action, data.next_obs, data.reward)
+    )
+    predicted = np.asarray(
+        cal._predict(trainer, state.model.params, state.model.stats, obs, action)
+    )
+    error = np.linalg.norm(predicted[:, :-1] - next_obs, axis=-1)
+    step = np.linalg.norm(next_obs - obs, axis=-1)
+    return {
+        "rows": int(rows.size),
+        "relative_one_step_error": float(np.median(error / step)),
+        "reward_error": float(np.median(np.abs(predicted[:, -1] - reward))),
+        "reward_size": float(np.median(np.abs(reward))),
     }
 
 
@@ -114,6 +144,7 @@ def bin_summary(steps: cal.ShadowSteps) -> list[dict]:
                 "drift": _median(finite(drift)),
                 "reward": _mean(finite(steps.reward[mask])),
                 "true_reward": _mean(finite(steps.true_reward[mask])),
+                "reward_error": _median(finite(np.abs(steps.reward - steps.true_reward)[mask])),
             }
         )
     return out
@@ -127,13 +158,30 @@ def _mean(x: np.ndarray) -> float | None:
     return float(np.mean(x)) if x.size else None
 
 
+DIAGNOSED = "a2c-model"
+"""The arm `diagnose` reads; its findings go to `a2c-model/diagnosis.json`."""
+
+
 def ensure(arm: str, results: Path, code: str) -> None:
     out = run_dir(results, arm)
     file = common.out_dir(results, "a2c-model/arms") / f"{arm}.json"
-    extra = _imagined
-    if arm == next(iter(ARMS)):
-        extra = lambda out: {**_imagined(out), "diagnosis": diagnose(out)}
-    cache.ensure_replayed(config_of(arm), out, file, {"arm": arm}, (code, EPISODES), extra)
+    cache.ensure_replayed(config_of(arm), out, file, {"arm": arm}, (code, EPISODES), _imagined)
+    if arm == DIAGNOSED:
+        ensure_diagnosis(results, code)
+
+
+def ensure_diagnosis(results: Path, code: str) -> None:
+    """`diagnose` the finished `DIAGNOSED` run into `a2c-model/diagnosis.json`, unless that
+    file already reads this run (its training seconds) at this commit."""
+    out = run_dir(results, DIAGNOSED)
+    file = common.out_dir(results, "a2c-model") / "diagnosis.json"
+    summary = cache.finished_summary(out)
+    kept = json.loads(file.read_text()) if file.exists() else {}
+    if summary is None or kept.get("train_seconds") == summary["train_seconds"]:
+        return
+    print(f"diagnosing {out.name}", flush=True)
+    data = {"commit": code, "train_seconds": summary["train_seconds"], **diagnose(out)}
+    common.write_json(file, data)
 
 
 def _number(x: float | None, digits: int = 0) -> str:
@@ -165,12 +213,23 @@ def report(results: Path) -> None:
             f"{'–' if share is None else f'{share:.2f}'} | {r['train_seconds']:,.0f} | "
             f"{', '.join(r['commits'])} |"
         )
-    found = [r for r in rows if "diagnosis" in r]
-    if found:
-        d = found[0]["diagnosis"]
+    diagnosis = results / "a2c-model" / "diagnosis.json"
+    if diagnosis.exists():
+        d = json.loads(diagnosis.read_text())
+        fit = d["fit"]
         lines += [
             "",
-            f"The default `a2c-model` at its final state, {d['shadow_episodes']} imagined "
+            f"Read at {d['commit']}. The default `a2c-model`'s M1 on the real transitions it "
+            f"was last fitted to ({fit[0]['rows']:,} rows of R per seed, medians): one-step "
+            "error relative to the real step "
+            + ", ".join(f"{f['relative_one_step_error']:.2f}" for f in fit)
+            + " by seed; reward error "
+            + ", ".join(f"{f['reward_error']:.2f}" for f in fit)
+            + " against rewards of size "
+            + ", ".join(f"{f['reward_size']:.2f}" for f in fit)
+            + ".",
+            "",
+            f"The same runs at their final state, {d['shadow_episodes']} imagined "
             "episodes per seed from fresh initial states, the real env stepped alongside "
             "(pooled over seeds and episodes). Relative error: the model's one-step error on "
             "the next observation over the real step's length from the same state (median); "
@@ -179,12 +238,13 @@ def report(results: Path) -> None:
             "same step.",
             "",
             "| imagined steps | share of imagined steps | relative error | drift "
-            "| reward (M1) | reward (real) |",
-            "|---|---|---|---|---|---|",
+            "| reward (M1) | reward (real) | reward error |",
+            "|---|---|---|---|---|---|---|",
             *(
                 f"| {b['steps'][0]}-{b['steps'][1]} | {b['share']:.1%} | "
                 f"{_number(b['relative_one_step_error'], 2)} | {_number(b['drift'], 2)} | "
-                f"{_number(b['reward'], 2)} | {_number(b['true_reward'], 2)} |"
+                f"{_number(b['reward'], 2)} | {_number(b['true_reward'], 2)} | "
+                f"{_number(b['reward_error'], 2)} |"
                 for b in d["bins"]
             ),
             "",
@@ -212,11 +272,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--arms", default=",".join(ARMS))
     parser.add_argument("--report", action="store_true", help="train nothing; rebuild the report")
     parser.add_argument("--results", type=Path, default=common.RESULTS)
+    parser.add_argument(
+        "--diagnose", action="store_true", help="diagnose the finished a2c-model run again"
+    )
     args = parser.parse_args(argv)
     arms = args.arms.split(",")
     if unknown := [a for a in arms if a not in ARMS]:
         parser.error(f"unknown arm: {', '.join(unknown)}")
-    if not args.report:
+    if args.diagnose:
+        (common.out_dir(args.results, "a2c-model") / "diagnosis.json").unlink(missing_ok=True)
+        ensure_diagnosis(args.results, cache.code_version())
+    elif not args.report:
         code = cache.code_version()
         common.compile_cache(args.results)
         for arm in arms:

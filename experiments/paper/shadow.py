@@ -76,9 +76,16 @@ class ShadowSteps:
     """The shadow real episode has not terminated before this step."""
 
 
-def _predict(trainer: Trainer, params: dict, obs: Array, onehot: Array) -> Array:
-    """`[N, obs], [N, A] -> [N, obs + 1]`: the model's [s', r], as eq. 2 and 3 see it."""
-    next_obs, reward = trainer.dynamics.predict(params, obs, onehot)
+def _predict(
+    trainer: Trainer, params: dict, stats, obs: Array, onehot: Array, normalized: bool = False
+) -> Array:
+    """`[N, obs], [N, A] -> [N, obs + 1]`: the model's [s', r] under its normaliser `stats`
+    (`ModelState.stats`), as training imagines them; `normalized`: in the model's own output
+    units, where eq. 3 and the disagreement are read (the raw ones without `model.normalize`)."""
+    dynamics = trainer.dynamics
+    next_obs, reward = dynamics.predict_normalized(params, stats, obs, onehot)
+    if not normalized:
+        next_obs, reward = dynamics.denormalize(stats, next_obs, reward)
     return jnp.concatenate([next_obs, reward[..., None]], axis=-1)
 
 
@@ -114,6 +121,8 @@ def shadow_rollouts(
     outputs = 1 if reduce == "sum" else trainer.obs_size + 1  # what the reward's term is over
     from_obs = jax.vmap(lambda o: env.from_observation(o, params))
     step = jax.vmap(env.step, (0, 0, 0, None))
+    stats = state.model.stats
+    env_reward = trainer.parts.real.exact_reward(trainer.config.model.env_reward)
     k_reset, k_play = jax.random.split(key)
     obs, real = jax.vmap(env.reset, (0, None))(jax.random.split(k_reset, episodes), params)
     ones = jnp.ones((episodes,), bool)
@@ -123,19 +132,22 @@ def shadow_rollouts(
         k_act, k_stop, k_ensemble, k_env = jax.random.split(key, 4)
         action = trainer.learner.act(state.learner.params, k_act, imagined)
         onehot = trainer.model_action(action)
-        predicted = _predict(trainer, state.model.params, imagined, onehot)
-        frozen = _predict(trainer, state.model.frozen, imagined, onehot)
-        sigma2 = scale * deviation(predicted, frozen, reduce)
-        sigma2_reward = scale * 0.5 * jnp.square(predicted[..., -1] - frozen[..., -1]) / outputs
+        own = lambda p: _predict(trainer, p, stats, imagined, onehot, normalized=True)
+        predicted_own, frozen = own(state.model.params), own(state.model.frozen)
+        sigma2 = scale * deviation(predicted_own, frozen, reduce)
+        sigma2_reward = scale * 0.5 * jnp.square(predicted_own[..., -1] - frozen[..., -1]) / outputs
+        predicted = _predict(trainer, state.model.params, stats, imagined, onehot)
         stop = stop_draw(k_stop, stop_probability(sigma2, k))
         env_keys = jax.random.split(k_env, episodes)
         true_next, _, true_reward = step(env_keys, from_obs(imagined), action, params)[:3]
         real_next, real, _, real_terminated, _, _ = step(env_keys, real, action, params)
-        next_obs = predicted[..., :-1]
+        next_obs, reward = predicted[..., :-1], predicted[..., -1]
+        if env_reward is not None:  # the run's imagined rewards were the env's own
+            reward = env_reward(imagined, action, next_obs)
         if ensemble is None:
             spread = jnp.zeros_like(sigma2)
         else:
-            members = jax.vmap(lambda p: _predict(trainer, p, imagined, onehot))(ensemble)
+            members = jax.vmap(own)(ensemble)
             spread = scale * disagreement(members, reduce)
         p_continue = ensemble_learning_degree(relative_disagreement(spread, error_scale), k)
         ensemble_stop = jax.random.uniform(k_ensemble, p_continue.shape) >= p_continue
@@ -146,7 +158,7 @@ def shadow_rollouts(
             one_step_error=jnp.linalg.norm(next_obs - true_next, axis=-1),
             compounding_error=jnp.linalg.norm(next_obs - real_next, axis=-1),
             step_size=jnp.linalg.norm(true_next - imagined, axis=-1),
-            reward=predicted[..., -1],
+            reward=reward,
             true_reward=true_reward,
             disagreement=spread,
             ensemble_ld=p_continue,
@@ -184,6 +196,7 @@ def policy_rollouts(
     and on imagined ones."""
     env, params, learner = trainer.env, trainer.env_params, trainer.learner
     gamma = trainer.config.agent.gamma
+    env_reward = trainer.parts.real.exact_reward(trainer.config.model.env_reward)
     step = jax.vmap(env.step, (0, 0, 0, None))
     k_real, k_imagined, k_reset = jax.random.split(key, 3)
     obs, real = jax.vmap(env.reset, (0, None))(jax.random.split(k_reset, episodes), params)
@@ -202,8 +215,12 @@ def policy_rollouts(
     def imagined_body(carry, key):
         obs, live, discount, total = carry
         action = learner.act(state.learner.params, key, obs)
-        predicted = _predict(trainer, state.model.params, obs, trainer.model_action(action))
+        predicted = _predict(
+            trainer, state.model.params, state.model.stats, obs, trainer.model_action(action)
+        )
         next_obs, reward = predicted[..., :-1], predicted[..., -1]
+        if env_reward is not None:
+            reward = env_reward(obs, action, next_obs)
         total = total + jnp.where(live, discount * reward, 0.0)
         live = live & ~env.is_terminal(next_obs, params)
         return (next_obs, live, discount * gamma, total), None
