@@ -35,14 +35,17 @@ TASK = "halfcheetah"
 SEEDS = 5
 STEPS = 1_000_000
 EPISODES = 10
-ARMS: dict[str, tuple[str, str]] = {
-    "a2c-model": ("a2c-model", "paper"),
-    "a2c": ("a2c", "paper"),
-    "branched-a2c-model": ("a2c-model", "branched"),
-    "branched-a2c": ("a2c", "branched"),
-    "branched-ldn": ("ldn", "branched"),
+ARMS: dict[str, tuple[str, str, dict]] = {
+    "a2c-model": ("a2c-model", "paper", {}),
+    "a2c": ("a2c", "paper", {}),
+    "branched-a2c-model": ("a2c-model", "branched", {}),
+    "branched-a2c": ("a2c", "branched", {}),
+    "branched-ldn": ("ldn", "branched", {}),
+    "a2c-model-true": ("a2c-model", "paper", {"model.world": "true"}),
 }
-"""Arm -> (algorithm, preset); the first is the one `diagnose` reads."""
+"""Arm -> (algorithm, preset, fields by `--set` name). "a2c-model-true" imagines as
+`a2c-model` does with the real simulator in the model's place (a perfect model, for the
+study): whether the scheme or the model's error costs `a2c-model` its returns."""
 SHADOW_EPISODES = 16
 """Imagined (and real) episodes per seed that `diagnose` plays."""
 BINS = ((1, 1), (2, 5), (6, 20), (21, 100), (101, 1000))
@@ -50,8 +53,8 @@ BINS = ((1, 1), (2, 5), (6, 20), (21, 100), (101, 1000))
 
 
 def config_of(arm: str) -> Config:
-    algo, preset = ARMS[arm]
-    config = from_preset(preset, env=TASK, algo=algo, seeds=SEEDS, steps=STEPS, k=(1.0,))
+    algo, preset, fields = ARMS[arm]
+    config = from_preset(preset, env=TASK, algo=algo, seeds=SEEDS, steps=STEPS, k=(1.0,), **fields)
     return validate(config)
 
 
@@ -204,8 +207,9 @@ def report(results: Path) -> None:
         "|---|---|---|---|---|---|---|",
     ]
     for r in rows:
-        algo, preset = ARMS[r["arm"]]
-        command = f"`--algo {algo}" + (" --preset branched`" if preset == "branched" else "`")
+        algo, preset, fields = ARMS[r["arm"]]
+        command = f"`--algo {algo}" + (" --preset branched" if preset == "branched" else "")
+        command += "".join(f" --set {name}={value}" for name, value in fields.items()) + "`"
         share = r["imagined_steps"] / r["env_steps"] if algo != "a2c" else None
         lines.append(
             f"| {r['arm']} | {command} | {stats.text(r['score'])} | "
