@@ -16,7 +16,7 @@ import typing
 from dataclasses import dataclass, field
 
 from ldn_jax import envs, networks, presets
-from ldn_jax.envs.mujoco import BACKEND_CHOICES
+from ldn_jax.envs.mujoco import BACKEND_CHOICES, resolve_backend
 from ldn_jax.presets import Layer
 
 ACTIVATIONS = tuple(networks.ACTIVATIONS)
@@ -808,6 +808,10 @@ def resolution(preset: str, given: dict[str, tuple[object, str]]) -> list[Layer]
     found += presets.layers(
         preset, env, algorithm.learner, _continuous(env), model_based=algorithm.uses_model
     )
+    backend = value("backend", Config.backend)
+    on_mjx = presets.ON_MJX.get(env, {}).get(algorithm.learner)
+    if on_mjx and backend in BACKEND_CHOICES and resolve_backend(backend) == "mjx":
+        found.append((f"MuJoCo on MJX, {env}, {algorithm.learner}", on_mjx))
     sources: dict[str, dict[str, object]] = {}
     for name, (setting, where) in given.items():
         sources.setdefault(where, {})[name] = setting

@@ -257,6 +257,16 @@ PRESETS["branched"] = {
     },
 }
 
+ON_MJX: dict[str, dict[str, dict[str, object]]] = {
+    # On MJX (`--backend auto` on a GPU or TPU) a seed's workers step side by side in one
+    # batched program, so more of them cost little wall clock, where the native engine on a
+    # CPU pays for each; halfcheetah's A2C family learns as well on 16 workers as on 8 for the
+    # same real steps (1M steps, seeds 0-4, docs/logs/tuning-mujoco.md, 2026-12-07).
+    "halfcheetah": {"a2c": {"workers": 16}},
+}
+"""Task -> learner -> fields for runs whose MuJoCo engine is MJX, over the task's and the
+preset's (a field given on the command line still wins)."""
+
 PRESET_PURPOSE = {
     "paper": "the paper's algorithm and constants (the default)",
     "tutorial": "the tutorial code's -5 terminal reward",

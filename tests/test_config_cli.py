@@ -222,3 +222,21 @@ def test_a_value_no_run_could_use_is_refused_whatever_the_algorithm():
     )
     assert "horizon must be >= 1" in refused("--algo", "ldn", "--set", "stop.horizon=0")
     assert "agent.critic_lr must be a finite number" in refused("--set", "agent.critic_lr=inf")
+
+
+def test_on_mjx_halfcheetahs_a2c_family_takes_more_workers_unless_told():
+    """`presets.ON_MJX`: the layer applies where the engine resolves to MJX (a GPU's `auto`,
+    or `--backend mjx` here); the native engine keeps the task's workers, and a given
+    `--workers` wins over both."""
+    workers = lambda *args: flags.explain_field(
+        flags.parse_args(["--env", "halfcheetah", *args]), "workers"
+    )
+    on_mjx = workers("--algo", "ldn", "--backend", "mjx")
+    assert on_mjx[0].split()[2] == "16" and "MuJoCo on MJX, halfcheetah, a2c" in on_mjx[-1]
+    assert workers("--algo", "ldn", "--backend", "native")[0].split()[2] == "8"
+    from ldn_jax.envs.mujoco import resolve_backend
+
+    auto = "16" if resolve_backend("auto") == "mjx" else "8"  # native on a CPU
+    assert workers("--algo", "ldn")[0].split()[2] == auto
+    assert workers("--algo", "a2c", "--backend", "mjx", "--workers", "4")[0].split()[2] == "4"
+    assert workers("--algo", "ppo", "--backend", "mjx")[0].split()[2] == "8"  # PPO: unmeasured
