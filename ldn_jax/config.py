@@ -254,6 +254,10 @@ class SACConfig:
     workers is followed by utd x n x W updates, all in one `lax.scan`."""
     learning_starts: int = 1000
     """Real transitions in the replay memory before the first update (per run)."""
+    random_steps: int = 0
+    """Real transitions at the start of a run played with actions drawn uniformly from
+    [-1, 1] instead of the policy's (SB3's and Spinning Up's warm-up; the zoo's halfcheetah
+    run: 10,000, with `learning_starts` 10,000); 0: the policy acts from the first step."""
     buffer_capacity: int = 1_000_000
     """Real transitions the replay memory keeps per run (a ring); a run allocates at most
     its steps budget."""
@@ -1135,6 +1139,7 @@ def _sac_checks(config: Config) -> list[tuple[bool, str]]:
             sac.learning_starts >= 0,
             f"sac learning_starts must be >= 0, got {sac.learning_starts}",
         ),
+        (sac.random_steps >= 0, f"sac random_steps must be >= 0, got {sac.random_steps}"),
         (
             sac.buffer_capacity >= 1,
             f"sac buffer_capacity must be >= 1, got {sac.buffer_capacity}",

@@ -137,7 +137,10 @@ def _segment_fn(
 
     def step(carry: EpisodeCarry, key: Array):
         k_act, k_world = jax.random.split(key)
-        action = learner.act(carry.learner.params, k_act, carry.obs)
+        if observe:  # real play: the learner may act otherwise at a run's start (`behave`)
+            action = learner.behave(carry.learner, k_act, carry.obs)
+        else:
+            action = learner.act(carry.learner.params, k_act, carry.obs)
         if reset is not None:
             k_world, k_reset = jax.random.split(k_world)
         next_obs, world, reward, terminated, truncated, extras = world_step(

@@ -134,6 +134,38 @@ def test_the_replay_memory_takes_each_live_row_and_updates_start_at_learning_sta
     assert all(jax.tree.leaves(moved["actor"])) and all(jax.tree.leaves(moved["target"]))
 
 
+def test_the_warm_up_plays_uniform_actions_until_the_memory_holds_random_steps():
+    """`sac.random_steps`: uniform actions in [-1, 1] in the real env while the replay memory
+    holds fewer rows, the policy's after; 0 (the default) acts as the policy from the start.
+    Through the trainer: the first iteration's stored actions are the warm-up's."""
+    from ldn_jax.config import from_preset, validate
+    from ldn_jax.trainer import Trainer
+
+    def first_actions(random_steps):
+        run = {**SAC_RUN, "seeds": 1, "sac": {**SAC_RUN["sac"], "random_steps": random_steps}}
+        trainer = Trainer(validate(from_preset("paper", **run)))
+        state = jax.jit(trainer.init_state)(jax.random.key(0))
+        learner = trainer.learner
+        obs = jnp.zeros((3, trainer.obs_size))
+        key = jax.random.key(1)
+        policy = learner.act(state.learner.params, key, obs)
+        warm = learner.behave(state.learner, key, obs)
+        full = state.learner.replace(
+            replay=state.learner.replay.replace(size=jnp.int32(max(random_steps, 1)))
+        )
+        np.testing.assert_array_equal(learner.behave(full, key, obs), policy)  # warm-up over
+        state, _ = jax.jit(lambda s: trainer.iteration(s, jnp.float32(1.0)))(state)
+        replay = state.learner.replay
+        return warm, policy, np.asarray(replay.data.action[: replay.size])
+
+    warm, policy, cold = first_actions(0)
+    np.testing.assert_array_equal(warm, policy)
+    warm, policy, stored = first_actions(100)
+    assert not np.allclose(warm, policy) and np.abs(warm).max() <= 1.0
+    assert stored.shape == cold.shape == (20, 1) and not np.allclose(stored, cold)
+    assert np.abs(stored).max() <= 1.0
+
+
 def test_a_sac_run_resumes_bitwise_with_its_replay_memory(tmp_path):
     from ldn_jax.config import from_preset
     from ldn_jax.host.run_dir import read_config
@@ -157,6 +189,7 @@ def test_a_sac_run_resumes_bitwise_with_its_replay_memory(tmp_path):
     [
         (["--env", "cartpole-v1"], "sac is for continuous actions, and cartpole-v1's are discrete"),
         (["--env", "hopper", "--set", "sac.utd=0"], "sac utd (updates per real step) must be >= 1"),
+        (["--env", "hopper", "--set", "sac.random_steps=-1"], "sac random_steps must be >= 0"),
         (["--env", "hopper", "--set", "schedule=episodes"], "it needs schedule 'steps'"),
         (["--env", "hopper", "--stop", "ld"], "sac imagines none"),
     ],

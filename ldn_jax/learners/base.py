@@ -441,6 +441,11 @@ class ActorCritic:
         """Sample from the policy, `[W, obs] -> [W]` (discrete) or `[W, d]` (continuous)."""
         return self.policy.sample(key, self.logits(params, obs))
 
+    def behave(self, state: LearnerState, key: Array, obs: Array) -> Array:
+        """The action in the real env: `act`'s (a learner that warms up otherwise reads its
+        whole state)."""
+        return self.act(state.params, key, obs)
+
     def greedy(self, params: dict, obs: Array) -> Array:
         """The deterministic action: argmax or the mean, as the env takes it."""
         return self.policy.env_action(self.policy.mode(self.logits(params, obs)))

@@ -251,6 +251,11 @@ class SquashedActions:
         return self.env_action(action)
 
 
+WARMUP_STREAM = 0x3A7
+"""Folded into an acting key for the warm-up's uniform actions (`SACConfig.random_steps`),
+so that the policy's own draw keeps its key."""
+
+
 class SACLearner:
     """SAC behind the learner protocol the rollout and the trainer call (`act`, `greedy`,
     `observe`, `update` after each segment of n real steps x W workers)."""
@@ -290,6 +295,17 @@ class SACLearner:
 
     def act(self, params: dict, key: Array, obs: Array) -> Array:
         return self.sac.act(params, key, obs)
+
+    def behave(self, state: SACRun, key: Array, obs: Array) -> Array:
+        """The action in the real env: uniform in [-1, 1] while the replay memory holds fewer
+        than `random_steps` rows (the warm-up), the policy's after."""
+        action = self.sac.act(state.params, key, obs)
+        if not self.own.random_steps:
+            return action
+        uniform = jax.random.uniform(
+            jax.random.fold_in(key, WARMUP_STREAM), action.shape, action.dtype, -1.0, 1.0
+        )
+        return jnp.where(state.replay.size < self.own.random_steps, uniform, action)
 
     def greedy(self, params: dict, obs: Array) -> Array:
         return self.sac.greedy(params, obs)
