@@ -62,11 +62,6 @@ def run_dir(results: Path, arm: str) -> Path:
     return results / "runs" / "a2c-model" / f"{TASK}-{arm}-s0+{SEEDS}-{STEPS}"
 
 
-def _imagined(out: Path) -> dict:
-    summary = json.loads((out / "summary.json").read_text())
-    return {"imagined_steps": summary["imagined_steps"], "env_steps": summary["env_steps"]}
-
-
 def diagnose(out: Path, key: jax.Array | None = None) -> dict:
     """The finished default `a2c-model` run in `out`, read at its final state per seed:
     `SHADOW_EPISODES` imagined episodes with the real env stepped alongside
@@ -130,13 +125,13 @@ def bin_summary(steps: cal.ShadowSteps) -> list[dict]:
     one-step error relative to the real step from the same state (median), the drift from
     the real trajectory (median), and the mean reward M1 credits beside the real env's."""
     live = steps.live.astype(bool)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        relative = steps.one_step_error / steps.step_size
     out = []
     for low, high in BINS:
         window = np.zeros_like(live)
         window[:, low - 1 : high] = True
         mask = live & window
-        with np.errstate(divide="ignore", invalid="ignore"):
-            relative = steps.one_step_error / steps.step_size
         drift = steps.compounding_error[mask & steps.real_live.astype(bool)]
         finite = lambda x: x[np.isfinite(x)]
         out.append(
@@ -168,7 +163,7 @@ DIAGNOSED = "a2c-model"
 def ensure(arm: str, results: Path, code: str) -> None:
     out = run_dir(results, arm)
     file = common.out_dir(results, "a2c-model/arms") / f"{arm}.json"
-    cache.ensure_replayed(config_of(arm), out, file, {"arm": arm}, (code, EPISODES), _imagined)
+    cache.ensure_replayed(config_of(arm), out, file, {"arm": arm}, (code, EPISODES), cache.imagined)
     if arm == DIAGNOSED:
         ensure_diagnosis(results, code)
 

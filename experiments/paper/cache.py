@@ -389,6 +389,13 @@ def ensure_replayed(
     )
 
 
+def imagined(out: Path) -> dict:
+    """The imagined and real steps of the finished run in `out`, all seeds together (an
+    `extra` of `ensure_replayed`)."""
+    summary = json.loads((out / "summary.json").read_text())
+    return {"imagined_steps": summary["imagined_steps"], "env_steps": summary["env_steps"]}
+
+
 def replayed(folder: Path) -> list[dict]:
     """The files `ensure_replayed` wrote in `folder` whose runs are replayed, in name order,
     each with `scores`: its seeds' mean greedy returns."""

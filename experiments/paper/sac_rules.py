@@ -15,7 +15,6 @@ both tasks is in.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -42,17 +41,12 @@ def run_dir(results: Path, task: str, arm: str, seed: int, steps: int = STEPS) -
     return results / "runs" / "sac-rules" / f"{task}-{arm}-s{seed}+1-{steps}"
 
 
-def _imagined(out: Path) -> dict:
-    summary = json.loads((out / "summary.json").read_text())
-    return {"imagined_steps": summary["imagined_steps"], "env_steps": summary["env_steps"]}
-
-
 def ensure(task: str, arm: str, seed: int, results: Path, code: str) -> None:
     """Train (or resume, or reuse) one seed's run, then replay it in gymnasium."""
     out = run_dir(results, task, arm, seed)
     file = common.out_dir(results, "sac-rules/arms") / f"{task}-{arm}-s{seed}.json"
     config, labels = config_of(task, arm, seed), {"task": task, "arm": arm}
-    cache.ensure_replayed(config, out, file, labels, (code, EPISODES), _imagined)
+    cache.ensure_replayed(config, out, file, labels, (code, EPISODES), cache.imagined)
 
 
 def rows_of(results: Path) -> list[dict]:

@@ -89,6 +89,16 @@ def _predict(
     return jnp.concatenate([next_obs, reward[..., None]], axis=-1)
 
 
+def _as_imagined(trainer: Trainer, stats, own: Array, obs: Array, action: Array, env_reward):
+    """M1's prediction in its own units (`_predict(..., normalized=True)`) as the run imagines
+    the step: the next observation and reward in the env's units, the reward the env's own
+    where the run used it (`env_reward`, None otherwise)."""
+    next_obs, reward = trainer.dynamics.denormalize(stats, own[..., :-1], own[..., -1])
+    if env_reward is not None:
+        reward = env_reward(obs, action, next_obs)
+    return next_obs, reward
+
+
 def shadow_rollouts(
     trainer: Trainer,
     state: TrainState,
@@ -133,17 +143,14 @@ def shadow_rollouts(
         action = trainer.learner.act(state.learner.params, k_act, imagined)
         onehot = trainer.model_action(action)
         own = lambda p: _predict(trainer, p, stats, imagined, onehot, normalized=True)
-        predicted_own, frozen = own(state.model.params), own(state.model.frozen)
-        sigma2 = scale * deviation(predicted_own, frozen, reduce)
-        sigma2_reward = scale * 0.5 * jnp.square(predicted_own[..., -1] - frozen[..., -1]) / outputs
-        predicted = _predict(trainer, state.model.params, stats, imagined, onehot)
+        predicted, frozen = own(state.model.params), own(state.model.frozen)
+        sigma2 = scale * deviation(predicted, frozen, reduce)
+        sigma2_reward = scale * 0.5 * jnp.square(predicted[..., -1] - frozen[..., -1]) / outputs
         stop = stop_draw(k_stop, stop_probability(sigma2, k))
         env_keys = jax.random.split(k_env, episodes)
         true_next, _, true_reward = step(env_keys, from_obs(imagined), action, params)[:3]
         real_next, real, _, real_terminated, _, _ = step(env_keys, real, action, params)
-        next_obs, reward = predicted[..., :-1], predicted[..., -1]
-        if env_reward is not None:  # the run's imagined rewards were the env's own
-            reward = env_reward(imagined, action, next_obs)
+        next_obs, reward = _as_imagined(trainer, stats, predicted, imagined, action, env_reward)
         if ensemble is None:
             spread = jnp.zeros_like(sigma2)
         else:
@@ -215,12 +222,9 @@ def policy_rollouts(
     def imagined_body(carry, key):
         obs, live, discount, total = carry
         action = learner.act(state.learner.params, key, obs)
-        predicted = _predict(
-            trainer, state.model.params, state.model.stats, obs, trainer.model_action(action)
-        )
-        next_obs, reward = predicted[..., :-1], predicted[..., -1]
-        if env_reward is not None:
-            reward = env_reward(obs, action, next_obs)
+        stats, onehot = state.model.stats, trainer.model_action(action)
+        own = _predict(trainer, state.model.params, stats, obs, onehot, normalized=True)
+        next_obs, reward = _as_imagined(trainer, stats, own, obs, action, env_reward)
         total = total + jnp.where(live, discount * reward, 0.0)
         live = live & ~env.is_terminal(next_obs, params)
         return (next_obs, live, discount * gamma, total), None
