@@ -467,3 +467,29 @@ def test_the_rule_study_tests_once_every_seed_is_in_and_corrects_by_holm(tmp_pat
     assert not any(t["shown"] for t in found if t["task"] == "halfcheetah")
     study.report(tmp_path)
     assert "not shown at 5 seeds" in (tmp_path / "sac-rules" / "sac-rules.md").read_text()
+
+
+def test_the_trailing_mean_of_the_curves_by_hand():
+    from experiments.paper.plots import smoothed
+
+    returns = np.array([[1.0, 2.0, 3.0, 4.0], [0.0, 0.0, 6.0, 0.0]])
+    np.testing.assert_allclose(smoothed(returns, 2), [[1, 1.5, 2.5, 3.5], [0, 0, 3, 3]])
+    np.testing.assert_allclose(smoothed(returns, 9), [[1, 1.5, 2, 2.5], [0, 0, 2, 1.5]])
+
+
+def test_the_curves_read_records_and_leave_out_runs_with_nothing_finished(tmp_path):
+    from experiments.paper import cache
+    from experiments.paper.plots import step_curves
+
+    runs = tmp_path / "runs" / "sac"
+    record = cache.record_of(runs / "hopper-sac-s5+1-200000")
+    record.mkdir(parents=True)
+    (record / "summary.json").write_text("{}")
+    steps = np.arange(1, 41, dtype=np.int32)[None, None] * 1000
+    np.savez(record / cache.HISTORY_FILE, env_steps=steps, episode_return=steps / 10.0)
+    missing = runs / "hopper-sac-s6+1-200000"
+    assert not step_curves({"hopper": {"sac": [missing]}}, tmp_path / "none.png", "t")
+    assert not (tmp_path / "none.png").exists()
+    panels = {"hopper": {"sac": [runs / "hopper-sac-s5+1-200000", missing]}}
+    assert step_curves(panels, tmp_path / "curves.png", "t", {"hopper": 2300.0})
+    assert (tmp_path / "curves.png").stat().st_size > 10_000

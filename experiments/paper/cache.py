@@ -279,6 +279,11 @@ def load_history(out: Path) -> dict[str, np.ndarray]:
     return RunDir(out).history()
 
 
+def has_history(out: Path) -> bool:
+    """`load_history(out)` has a finished run to read (its directory's or its record's)."""
+    return RunDir(out).is_finished() or _recorded(out) is not None
+
+
 def budget_text(config: Config) -> str:
     """A run's budget per seed, as its config states it: "600,000 steps" or "8 episodes"."""
     if config.steps is not None:

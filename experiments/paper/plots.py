@@ -1,12 +1,15 @@
-"""The paper scripts' figures drawn from their cached runs (Tables 4 and 5's curves)."""
+"""The paper scripts' figures drawn from their cached runs (Tables 4 and 5's curves, the
+off-policy studies' curves against real steps)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from experiments.paper.cache import load_history
+import numpy as np
+
+from experiments.paper.cache import has_history, load_history
 from experiments.paper.common import PAPER_ALGOS
-from ldn_jax.host.plots import band_panel
+from ldn_jax.host.plots import band_panel, pyplot
 
 
 def mujoco_curves(
@@ -36,3 +39,57 @@ def mujoco_curves(
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
+
+
+def smoothed(returns: np.ndarray, window: int) -> np.ndarray:
+    """`[S, T]` -> the trailing mean over the last `window` iterations (fewer at the start)."""
+    total = np.cumsum(returns, axis=1)
+    ahead = np.concatenate([np.zeros_like(total[:, :window]), total[:, :-window]], axis=1)
+    counts = np.minimum(np.arange(1, returns.shape[1] + 1), window)
+    return (total - ahead[:, : returns.shape[1]]) / counts
+
+
+def step_curves(
+    panels: dict[str, dict[str, list[Path]]],
+    path: Path,
+    title: str,
+    levels: dict[str, float] | None = None,
+) -> bool:
+    """One panel per task (`panels[task][label]`: the run directories, each with its seeds,
+    K = 1): the training episodes' return against real steps, per seed the trailing mean
+    over a twentieth of the run's iterations, mean and 95% band over all the label's seeds;
+    a dashed line at `levels[task]` if given. Runs of one label are cut to the shortest; a
+    run with nothing finished to read is left out. Writes nothing without a run; says whether
+    it wrote the figure."""
+    from matplotlib.ticker import FuncFormatter
+
+    panels = {
+        task: {label: [out for out in runs if has_history(out)] for label, runs in labels.items()}
+        for task, labels in panels.items()
+    }
+    panels = {task: labels for task, labels in panels.items() if any(labels.values())}
+    if not panels:
+        return False
+    plt = pyplot()
+    fig, axes = plt.subplots(1, len(panels), figsize=(5 * len(panels), 3.8), dpi=120)
+    for ax, (task, labels) in zip(np.atleast_1d(axes), panels.items(), strict=True):
+        curves = {}
+        for label, runs in labels.items():
+            if not runs:
+                continue
+            histories = [load_history(out) for out in runs]
+            length = min(h["env_steps"].shape[-1] for h in histories)
+            steps = np.concatenate([h["env_steps"][0, :, :length] for h in histories])
+            returns = np.concatenate([h["episode_return"][0, :, :length] for h in histories])
+            window = max(1, length // 20)
+            curves[label] = (steps, smoothed(returns.astype(float), window))
+        level = levels.get(task) if levels else None
+        band_panel(ax, curves, task, level, "target", legend_size=7)
+        ax.set_xlabel("real steps per seed")
+        ax.set_ylabel("training episode return")
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1000:g}k"))
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return True

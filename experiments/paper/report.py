@@ -181,9 +181,18 @@ def render(results: Path, scale: common.Scale) -> str:
     ]
     for section in (setup(data, scale), summary, *body):
         lines += render_section(section)
-    # The studies run on their own (experiments/paper/headline.py, sac.py, locomotion.py,
-    # family.py, a2c.py, a2c_model.py and branched.py); the confirmatory ones first.
-    studies = ("headline", "sac", "locomotion", "family", "a2c/user-command", "a2c/a2c")
+    # The studies run on their own (experiments/paper/headline.py, sac.py, sac_rules.py,
+    # locomotion.py, family.py, a2c.py, a2c_model.py and branched.py); the confirmatory ones
+    # first.
+    studies = (
+        "headline",
+        "sac",
+        "sac-rules",
+        "locomotion",
+        "family",
+        "a2c/user-command",
+        "a2c/a2c",
+    )
     studies += ("a2c-model", "branched")
     for study in studies:
         text = results / (f"{study}/{study}.md" if "/" not in study else f"{study}.md")

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.paper import cache, common
+from experiments.paper import cache, common, plots
 from ldn_jax.config import Config, from_preset, validate
 from ldn_jax.host import stats
 
@@ -153,6 +153,16 @@ def pooled(results: Path) -> list[dict]:
     return rows
 
 
+def runs_of(results: Path, row: dict) -> list[Path]:
+    """The run directories behind a `pooled` row, one per run (each reads as its record
+    where the directory is gone)."""
+    firsts = np.cumsum([0, *row["seeds_per_run"][:-1]])
+    return [
+        run_dir(results, row["task"], row["seeds"][i], n, row["steps"])
+        for i, n in zip(firsts, row["seeds_per_run"], strict=True)
+    ]
+
+
 def _seeds(seeds: list[int]) -> str:
     """5, 6, 7 -> "5-7"; gaps listed."""
     if seeds == list(range(seeds[0], seeds[-1] + 1)):
@@ -186,6 +196,17 @@ def report(results: Path) -> None:
             f"{stats.text(r['score'])} | {r['reached']} of {len(r['scores'])} | "
             f"{r['target']:,.0f} | {met} | {speed} | {', '.join(r['commits'])} |"
         )
+    panels: dict[str, dict[str, list[Path]]] = {}
+    for r in rows:
+        label = f"{r['label']}, seeds {_seeds(r['seeds'])}"
+        panels.setdefault(r["task"], {})[label] = runs_of(results, r)
+    levels = {task: target for task, (_, target) in TASKS.items()}
+    title = "sac: training episode returns (trailing mean over 5% of the run)"
+    if plots.step_curves(panels, out / "sac.png", title, levels):
+        lines += [
+            "",
+            "Training curves (each seed's episode returns, smoothed): ![sac](sac/sac.png)",
+        ]
     lines += side_lines(results)
     (out / "sac.md").write_text("\n".join(lines) + "\n")
     print(f"wrote {out}/sac.json and sac.md")

@@ -18,7 +18,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from experiments.paper import cache, common
+from experiments.paper import cache, common, plots
 from ldn_jax.config import Config, from_preset, validate
 from ldn_jax.host import stats
 
@@ -121,7 +121,15 @@ def report(results: Path) -> None:
     found = tests(rows)
     out = common.out_dir(results, "sac-rules")
     common.write_json(out / "sac-rules.json", {"rows": rows, "tests": found})
-    (out / "sac-rules.md").write_text(section(rows, found))
+    panels: dict[str, dict[str, list[Path]]] = {}
+    for r in rows:
+        runs = [run_dir(results, r["task"], r["arm"], seed) for seed in r["seeds"]]
+        panels.setdefault(r["task"], {})[r["arm"]] = runs
+    title = "sac, sac-model, sac-ldn at UTD 1: training episode returns (trailing mean)"
+    text = section(rows, found)
+    if plots.step_curves(panels, out / "sac-rules.png", title):
+        text += "\nTraining curves per arm: ![sac-rules](sac-rules/sac-rules.png)\n"
+    (out / "sac-rules.md").write_text(text)
     print(f"wrote {out}/sac-rules.json and sac-rules.md")
 
 
