@@ -5,6 +5,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import jax
 import numpy as np
 import pytest
 
@@ -57,6 +58,9 @@ def test_run_dir_files_and_fields(run_dir):
     }  # fmt: skip
     assert len(summary["runs"]) == 4 and all(set(r) == run_fields for r in summary["runs"])
     assert {r["seed"] for r in summary["runs"]} == {3, 4}
+    # what computed the bits besides the config: another CPU type may round differently
+    assert set(summary["host"]) == {"cpu", "jax", "jaxlib", "mujoco"}
+    assert summary["host"]["jax"] == jax.__version__ and summary["host"]["cpu"]
 
 
 def test_load_policy_returns_python_ints(run_dir):

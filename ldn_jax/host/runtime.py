@@ -18,6 +18,27 @@ from ldn_jax.host.settings import UsageError
 from ldn_jax.trainer import Trainer
 
 
+def host() -> dict:
+    """What computed a run's bits besides its config: the CPU model and the versions of JAX
+    and MuJoCo. XLA compiles for the CPU it runs on, so the same config and code on another
+    CPU type (AVX-512 or not, Intel or AMD) may round differently from the first iteration."""
+    import importlib.metadata
+
+    import jaxlib
+
+    cpu = "unknown"
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    try:
+        mujoco = importlib.metadata.version("mujoco")
+    except importlib.metadata.PackageNotFoundError:
+        mujoco = None
+    return {"cpu": cpu, "jax": jax.__version__, "jaxlib": jaxlib.__version__, "mujoco": mujoco}
+
+
 def default_compile_cache() -> Path:
     """Per user: $XDG_CACHE_HOME/ldn-jax/jax-cache, else ~/.cache/ldn-jax/jax-cache."""
     base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"

@@ -21,7 +21,7 @@ from ldn_jax.config import Config
 from ldn_jax.host import summaries
 from ldn_jax.host.loggers import Logger, NullLogger
 from ldn_jax.host.run_dir import FINAL, RunDir
-from ldn_jax.host.runtime import compile_chunk, evaluator
+from ldn_jax.host.runtime import compile_chunk, evaluator, host
 from ldn_jax.trainer import Trainer
 
 
@@ -150,6 +150,7 @@ def train(config: Config, out: Path, options: TrainOptions | None = None, **fiel
     summary["eval_share"] = round(eval_seconds / max(summary["train_seconds"], 1e-9), 3)
     summary["devices"] = 1 if mesh is None else mesh.size
     summary["bitwise"] = bitwise
+    summary["host"] = host()
     if writer:
         run.write_summary(summary)
         summaries.plot_curves(config, history, run)
