@@ -455,9 +455,13 @@ class ImagineConfig:
     "mbpo": its scheduled horizon) or sooner by `stop`, as a truncation, and followed at
     once by another from a fresh draw, until the iteration has imagined `ratio`
     steps per real step (whole segments). The learner updates on every n steps of the
-    `branches` rollouts, so every update is a full batch; `imagine` is not read."""
+    `branches` rollouts, so every update is a full batch; `imagine` is not read. The
+    off-policy learners (sac-model, sac-ldn) play MBPO's layout instead: `branches` rollouts,
+    one from each start, each until its cut, rule or predicted termination ends it, none
+    after it; `ratio` is not read there."""
     branches: int = 64
-    """`start` "real": the imagined rollouts played side by side."""
+    """`start` "real": the imagined rollouts played side by side (sac-model, sac-ldn: the
+    starts per iteration)."""
     cut: int = 5
     """`start` "real": a branch is cut after this many steps (stop "mbpo": after its
     scheduled horizon instead), or sooner by `stop`."""
@@ -681,6 +685,19 @@ class Config:
     def branch_rows(self, max_steps: int) -> int:
         """The most imagined rows one branched stage plays (its segments x branches x n)."""
         return self.branch_segments(max_steps) * self.imagine.branches * self.agent.n_steps
+
+    @property
+    def branch_horizon(self) -> int:
+        """The longest one branch may run: stop "mbpo"'s `horizon_max`, else `imagine.cut`,
+        within the episode limit."""
+        longest = self.stop.horizon_max if self.stop_rule == "mbpo" else self.imagine.cut
+        return min(longest, self.episode_limit)
+
+    @property
+    def remembered_rows(self) -> int:
+        """The most imagined rows one off-policy branched stage plays (sac-model, sac-ldn):
+        `branches` rollouts of at most `branch_horizon` steps, one from each start."""
+        return self.imagine.branches * self.branch_horizon
 
     @property
     def episode_limit(self) -> int:

@@ -202,18 +202,26 @@ _A2C_PPO = lambda ppo, **both: {
 }
 
 # SAC's branches in MBPO's manner: a model fit every 250 real steps, until its held-out error
-# stalls; 400 rollouts side by side, 20 imagined steps per real one kept for 4 fits
-# (`sac.model_retain`), 5% real rows in each batch. sac-model's cut is MBPO's schedule
-# (hopper's by default: 1 step until 20k real steps, 15 from 100k; halfcheetah's and
-# walker2d's 1 throughout, ant's up to 25), sac-ldn's the LD draw under a cap of 15
-# (docs/logs/mbpo-reference.md).
+# stalls; then 5,000 rollouts from states of R, each to its horizon (MBPO's 100,000 starts
+# per 250 steps at 20 updates per step, scaled to one: each imagined row is drawn as often
+# as in MBPO), their rows kept for 4 fits (`sac.model_retain`), 5% real rows in each batch.
+# sac-model's horizon is MBPO's schedule (hopper's by default: 1 step until 20k real steps,
+# 15 from 100k; halfcheetah's and walker2d's 1 throughout, ant's up to 25), sac-ldn's the LD
+# draw under a cap of 15. The model is MBPO's: 7 members of 4 x 200 swish units, 5 elites,
+# and no support box. The first 5,000 real steps act uniformly at random and the updates
+# start there, as MBPO's exploration steps (docs/logs/mbpo-reference.md).
 _MBPO = {
     "iteration_steps": 250,
-    "imagine.branches": 400,
-    "imagine.ratio": 20.0,
+    "sac.random_steps": 5000,
+    "sac.learning_starts": 5000,
+    "model.support": None,
+    "imagine.branches": 5000,
     "imagine.cut": 15,
     "imagine.real_share": 0.05,
     "model.early_stop": True,
+    "model.ensemble": 7,
+    "model.elites": 5,
+    "model.hidden_layers": 4,
 }
 _MBPO_FLAT = {"sac": {"stop.horizon_max": 1}}
 _MBPO_ANT = {"sac": {"stop.horizon_max": 25}}

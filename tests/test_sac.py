@@ -207,8 +207,10 @@ def test_bad_sac_settings_are_one_line(argv, needle):
 
 MBPO_RUN = dict(env="hopper", algo="sac-model", seeds=1, steps=60, iteration_steps=20)
 MBPO_RUN["sac"] = {"learning_starts": 20, "hidden": 16, "batch_size": 20, "model_retain": 2}
-MBPO_RUN["imagine"] = {"branches": 6, "ratio": 2.0}
+MBPO_RUN["sac"] |= {"random_steps": 20}
+MBPO_RUN["imagine"] = {"branches": 6}
 MBPO_RUN["model"] = {"hidden": 16, "hidden_layers": 1, "early_stop": False, "updates": 2}
+MBPO_RUN["stop"] = {"horizon_max": 2, "horizon_from": 20, "horizon_to": 40}
 
 
 def test_mbpo_branches_start_in_r_and_fill_a_model_memory_of_the_retained_iterations():
@@ -224,15 +226,17 @@ def test_mbpo_branches_start_in_r_and_fill_a_model_memory_of_the_retained_iterat
     config = validate(from_preset("branched", **run))  # 4 iterations: the last checks it
     trainer = Trainer(config)
     learner = trainer.learner
-    # 2 imagined per real step: 40 rows an iteration, in whole segments of 6 branches x 1
-    # step (42), for 2 iterations
-    assert learner.memories.imagined == 2 * 42 and learner.memories.real_share == 0.05
+    # 6 branches of at most 2 steps (the schedule's `horizon_max`) an iteration, for 2
+    # iterations
+    assert learner.memories.imagined == 2 * 6 * 2 and learner.memories.real_share == 0.05
     state = jax.jit(trainer.init_state)(jax.random.key(0))
     step = jax.jit(lambda s: trainer.iteration(s, jnp.float32(1.0)))
-    sizes = []
+    sizes, added = [], []
     for _ in range(3):
+        before = int(state.learner.imagined.cursor)
         state, _ = step(state)
         sizes.append(int(state.learner.imagined.size))
+        added.append((int(state.learner.imagined.cursor) - before) % 24)
         memory, real = state.learner.imagined, state.buffer
         starts = np.asarray(memory.data.obs[: memory.size])
         stored = np.asarray(real.data.obs[: real.size])
@@ -240,9 +244,11 @@ def test_mbpo_branches_start_in_r_and_fill_a_model_memory_of_the_retained_iterat
         # first step of a branch starts in R: at least `branches` rows are states of R
         in_r = (np.abs(starts[:, None, :] - stored[None, :, :]).max(-1) == 0).any(1)
         assert in_r.sum() >= 6
-    # 2 iterations' rows kept: the third overwrites the first's (the cursor wrapped)
-    assert sizes == [42, 84, 84] and int(state.learner.imagined.cursor) == 126 % 84
-    assert int(state.learner.replay.size) == 60
+    # one step per branch before 20 real steps, two from 40 (a predicted fall ends one
+    # sooner): the rows grow with the horizon from the same 6 starts (MBPO's layout)
+    assert added[0] == 6 and 6 < added[2] <= 12, added
+    # 2 iterations' rows kept: the third overwrites the first's (the ring wrapped)
+    assert sizes[-1] == min(24, sum(added)) and int(state.learner.replay.size) == 60
     _learned_termination_ends_the_imagined_steps_it_predicts(state, step)
 
 

@@ -276,7 +276,7 @@ class SACLearner:
         budget = config.steps or config.sac.buffer_capacity
         memories = Memories(real=min(config.sac.buffer_capacity, budget))
         if config.algorithm.uses_model:
-            imagined = config.sac.model_retain * config.branch_rows(config.episode_limit)
+            imagined = config.sac.model_retain * config.remembered_rows
             memories = Memories(memories.real, imagined, config.imagine.real_share)
         return cls(config.agent, config.sac, obs_size, action_spec, memories)
 

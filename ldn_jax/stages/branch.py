@@ -124,14 +124,19 @@ def branches(
 def remembered(
     parts: Parts, state: TrainState, key: Array, gain: Array, real: RealPlay
 ) -> tuple[TrainState, Episodes]:
-    """MBPO's rollouts for an off-policy learner: the iteration's branches played by the
-    current policy, no update on them here; their rows go to the learner's model memory
-    (`SACLearner.remember`), which its updates during the next real play draw from."""
+    """MBPO's rollouts for an off-policy learner: `branches` rollouts played by the current
+    policy, one from each start drawn from R, each until its horizon, the stop rule or a
+    predicted termination ends it (none follows it: MBPO's layout, so the rows grow with the
+    horizon and every rule decides how far the same starts go); no update on them here.
+    Their rows go to the learner's model memory (`SACLearner.remember`), which its updates
+    during the next real play draw from."""
     k_start, k_play, k_first = jax.random.split(key, 3)
     plan = branching(parts, state, (k_start, k_first), gain, real)
     player = Player(parts.learner, plan.world, parts.real.max_steps, horizon=plan.horizon)
     player = dataclasses.replace(player, learn=False)
-    _, imagined = play_batch(k_play, state.learner, player, plan.start, plan.batch)
+    n_steps = parts.learner.config.n_steps
+    batch = Batch(segments=-(-parts.config.branch_horizon // n_steps))
+    _, imagined = play_batch(k_play, state.learner, player, plan.start, batch)
     return state.replace(learner=parts.learner.remember(state.learner, imagined.steps)), imagined
 
 
