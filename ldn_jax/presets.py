@@ -131,7 +131,8 @@ _MUJOCO_PPO = {
     "ppo.value_clip": 0.2,
 }
 _HOPPING = {**_LOCOMOTION, "ppo": _MUJOCO_PPO}
-_A2C_HOPPER = {**_LOCOMOTION["a2c"], "agent.normalize_obs": True, "agent.normalize_reward": True}
+_A2C_OBS = {**_LOCOMOTION["a2c"], "agent.normalize_obs": True}
+_A2C_HOPPER = {**_A2C_OBS, "agent.normalize_reward": True}
 
 # The 1M steps MuJoCo results are usually quoted after (rl-baselines3-zoo).
 _LONG = {"steps": 1_000_000, "chunk_iterations": 1}
@@ -144,14 +145,15 @@ TASKS: dict[str, dict[str, object]] = {
         **_LONG,
         "learners": {
             # standardised observations (docs/defaults.md, "Locomotion tasks")
-            "a2c": {**_LOCOMOTION["a2c"], "agent.normalize_obs": True},
+            "a2c": _A2C_OBS,
             "ppo": {**_LOCOMOTION["ppo"], **_ZOO_HALFCHEETAH_PPO},
         },
     },
     # the A2C family: standardised observations and rewards (docs/defaults.md, "Locomotion
     # tasks"; chosen on seeds 0-4, 2026-12-07)
     "hopper": {**_LONG, "learners": {**_HOPPING, "a2c": _A2C_HOPPER}},
-    "walker2d": {**_LONG, "learners": _HOPPING},
+    # the A2C family: standardised observations (chosen on seeds 0-4, 2026-12-07)
+    "walker2d": {**_LONG, "learners": {**_HOPPING, "a2c": _A2C_OBS}},
     # No support box: in 105 dimensions imagined episodes leave it at once (docs/defaults.md,
     # "Continuous control").
     "ant": {**_LONG, "learners": _HOPPING, "model.support": None},
