@@ -71,7 +71,8 @@ def step_curves(
     if not panels:
         return False
     plt = pyplot()
-    fig, axes = plt.subplots(1, len(panels), figsize=(5 * len(panels), 3.8), dpi=120)
+    width = max(7.0, 5 * len(panels))
+    fig, axes = plt.subplots(1, len(panels), figsize=(width, 3.8), dpi=120)
     for ax, (task, labels) in zip(np.atleast_1d(axes), panels.items(), strict=True):
         curves = {}
         for label, runs in labels.items():

@@ -125,7 +125,7 @@ def report(results: Path) -> None:
     for r in rows:
         runs = [run_dir(results, r["task"], r["arm"], seed) for seed in r["seeds"]]
         panels.setdefault(r["task"], {})[r["arm"]] = runs
-    title = "sac, sac-model, sac-ldn at UTD 1: training episode returns (trailing mean)"
+    title = "training episode returns per arm, UTD 1 (trailing mean)"
     text = section(rows, found)
     if plots.step_curves(panels, out / "sac-rules.png", title):
         text += "\nTraining curves per arm: ![sac-rules](sac-rules/sac-rules.png)\n"
