@@ -236,7 +236,7 @@ def test_mbpo_branches_start_in_r_and_fill_a_model_memory_of_the_retained_iterat
         before = int(state.learner.imagined.cursor)
         state, _ = step(state)
         sizes.append(int(state.learner.imagined.size))
-        added.append((int(state.learner.imagined.cursor) - before) % 24)
+        added.append((int(state.learner.imagined.cursor) - before) % learner.memories.imagined)
         memory, real = state.learner.imagined, state.buffer
         starts = np.asarray(memory.data.obs[: memory.size])
         stored = np.asarray(real.data.obs[: real.size])
@@ -248,7 +248,10 @@ def test_mbpo_branches_start_in_r_and_fill_a_model_memory_of_the_retained_iterat
     # sooner): the rows grow with the horizon from the same 6 starts (MBPO's layout)
     assert added[0] == 6 and 6 < added[2] <= 12, added
     # 2 iterations' rows kept: the third overwrites the first's (the ring wrapped)
-    assert sizes[-1] == min(24, sum(added)) and int(state.learner.replay.size) == 60
+    assert (
+        sizes[-1] == min(learner.memories.imagined, sum(added))
+        and int(state.learner.replay.size) == 60
+    )
     _learned_termination_ends_the_imagined_steps_it_predicts(state, step)
 
 

@@ -368,21 +368,16 @@ def scale_record(scale: Scale) -> dict:
 
 def machine() -> dict:
     import jax
-    import jaxlib
 
-    model = "unknown"
-    cpuinfo = Path("/proc/cpuinfo")
-    if cpuinfo.exists():
-        for line in cpuinfo.read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
+    from ldn_jax.host.runtime import host
+
+    found = host()  # the CPU model and versions a run's summary records
     return {
-        "cpu": model,
+        "cpu": found["cpu"],
         "cores": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
         "jax_backend": jax.default_backend(),
-        "jax": jax.__version__,
-        "jaxlib": jaxlib.__version__,
+        "jax": found["jax"],
+        "jaxlib": found["jaxlib"],
         "python": platform.python_version(),
         "date": time.strftime("%Y-%m-%d"),
     }

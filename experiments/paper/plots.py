@@ -46,7 +46,7 @@ def smoothed(returns: np.ndarray, window: int) -> np.ndarray:
     total = np.cumsum(returns, axis=1)
     ahead = np.concatenate([np.zeros_like(total[:, :window]), total[:, :-window]], axis=1)
     counts = np.minimum(np.arange(1, returns.shape[1] + 1), window)
-    return (total - ahead[:, : returns.shape[1]]) / counts
+    return (total - ahead) / counts
 
 
 def step_curves(
