@@ -1217,6 +1217,14 @@ def test_the_family_study_says_which_model_runs_never_imagined(tmp_path):
     assert "| hopper | A3C | 1,000,000 | 2 |" in text and "| 150, 250 | – | 0 | 300 |" in text
     assert "| hopper | MBRL-LDN |" in text and "| 2,000 (1 of 2 seeds none) | 0 | 300 |" in text
     assert "Not measured yet: inverted_pendulum a2c," in text and "hopper a2c-model" in text
+    assert "| 300 | not recorded |" in text and "stale" not in text  # rows from before the column
+    # hopper's family standardises observations and rewards: a row that did not is stale
+    fresh = {**a2c, "standardised": "observations and rewards"}
+    text = family.section([fresh, {**ldn, "standardised": "nothing"}])
+    assert "| 300 | observations and rewards |" in text
+    assert "| 300 | nothing (not today's default) |" in text
+    assert "default changed (hopper ldn): the column" in text
+    assert family.standardised({"normalize_obs": True, "normalize_reward": False}) == "observations"
     family.curves([a2c, ldn], tmp_path / "family.png")  # from the kept curves, without the runs
     assert (tmp_path / "family.png").stat().st_size > 0
     config = family.config_of("ant", "a2c-model", 5)

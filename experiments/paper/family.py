@@ -1,7 +1,7 @@
 """The A2C family on the six MuJoCo tasks at their default budgets.
 
     python -m experiments.paper.family [--envs ENV,...] [--algos ALGO,...] [--seeds N]
-        [--results DIR]
+        [--results DIR] [--report]
 
 Not a table of the paper: what `--algo a2c`, `a2c-model` and `ldn` give on each MuJoCo task
 at its default budget and constants (`ldn_jax.presets.TASKS`), as `ldn-jax --env ENV --algo
@@ -19,6 +19,7 @@ are the targets' runs, the same configs), and rows not run this time are kept.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -46,6 +47,27 @@ def run_dir(results: Path, env: str, algo: str, seeds: int) -> Path:
     return cache.family_run_dir(results, env, algo, seeds)
 
 
+def standardised(agent: dict) -> str:
+    """What the run standardises of its inputs, from its config's `agent` section."""
+    parts = [
+        name
+        for name, on in (
+            ("observations", agent["normalize_obs"]),
+            ("rewards", agent["normalize_reward"]),
+        )
+        if on
+    ]
+    return " and ".join(parts) or "nothing"
+
+
+def _standardised_of(*dirs: Path | None) -> str | None:
+    """`standardised` of the first of `dirs` that holds a config; None where none does."""
+    for where in dirs:
+        if where is not None and (file := where / "config.json").is_file():
+            return standardised(json.loads(file.read_text())["agent"])
+    return None
+
+
 def row_of(env: str, algo: str, out: Path, summary: dict) -> dict:
     runs = summary["runs"]
     history = cache.load_history(out)
@@ -61,6 +83,7 @@ def row_of(env: str, algo: str, out: Path, summary: dict) -> dict:
         "wall_seconds": summary["train_seconds"] + summary["compile_seconds"],
         "diverged": sum(bool(r["diverged"]) for r in runs),
         "curve": locomotion.kept_curve(history),
+        "standardised": _standardised_of(out),
     }
 
 
@@ -72,7 +95,17 @@ def _imagined_text(row: dict) -> str:
     return f"{mean:,.0f}" + (f" ({idle} of {row['seeds']} seeds none)" if idle else "")
 
 
+def _default_standardised(env: str, algo: str, seeds: int) -> str:
+    return standardised(dataclasses.asdict(config_of(env, algo, seeds).agent))
+
+
 def section(rows: list[dict]) -> str:
+    old = [
+        r
+        for r in rows
+        if r.get("standardised") is not None
+        and r["standardised"] != _default_standardised(r["env"], r["algo"], r["seeds"])
+    ]
     lines = [
         f"## {TITLE}",
         "",
@@ -87,10 +120,11 @@ def section(rows: list[dict]) -> str:
         "![family](family/family.png)",
         "",
         "| task | algorithm | real steps, mean | seeds | final moving return | per seed "
-        "| greedy return | per seed | imagined steps | diverged | wall s |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| greedy return | per seed | imagined steps | diverged | wall s | standardised |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
+        mark = " (not today's default)" if r in old else ""
         lines.append(
             f"| {r['env']} | {common.PAPER_ALGOS.get(r['algo'], r['algo'])} "
             f"| {r['steps']:,} | {r['seeds']} "
@@ -98,12 +132,20 @@ def section(rows: list[dict]) -> str:
             f"| {', '.join(f'{v:,.0f}' for v in r['final_moving_return'])} "
             f"| {stats.text(stats.estimate(r['eval_return']))} "
             f"| {', '.join(f'{v:,.0f}' for v in r['eval_return'])} "
-            f"| {_imagined_text(r)} | {r['diverged']} | {r['wall_seconds']:,.0f} |"
+            f"| {_imagined_text(r)} | {r['diverged']} | {r['wall_seconds']:,.0f} "
+            f"| {r.get('standardised') or 'not recorded'}{mark} |"
         )
     have = {(r["env"], r["algo"]) for r in rows}
     missing = [f"{env} {algo}" for env in ENVS for algo in ALGOS if (env, algo) not in have]
     if missing:
         lines += ["", f"Not measured yet: {', '.join(missing)}."]
+    if old:
+        names = ", ".join(f"{r['env']} {r['algo']}" for r in old)
+        lines += [
+            "",
+            f"Rows trained before their task's default changed ({names}): the column "
+            "'standardised' says what they ran with; they are stale until retrained.",
+        ]
     return "\n".join(lines) + "\n"
 
 
@@ -149,12 +191,20 @@ def _names(text: str, known: tuple[str, ...], flag: str, parser) -> list[str]:
     return names
 
 
+def _write(out: Path, rows: dict) -> None:
+    ordered = [rows[e, a] for e in ENVS for a in ALGOS if (e, a) in rows]
+    (out / "family.md").write_text(section(ordered))
+    common.write_json(out / "family.json", {"machine": common.machine(), "rows": ordered})
+    curves(ordered, out / "family.png")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--envs", default=",".join(ENVS))
     parser.add_argument("--algos", default=",".join(ALGOS))
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--results", type=Path, default=common.RESULTS)
+    parser.add_argument("--report", action="store_true", help="train nothing; rebuild the files")
     args = parser.parse_args(argv)
     envs = _names(args.envs, ENVS, "--envs", parser)
     algos = _names(args.algos, ALGOS, "--algos", parser)
@@ -165,15 +215,19 @@ def main(argv: list[str] | None = None) -> int:
         if record.exists()
         else {}
     )
+    for (env, algo), row in rows.items():  # rows recorded before the column: from their records
+        if "standardised" not in row:
+            run = run_dir(args.results, env, algo, row["seeds"])
+            row["standardised"] = _standardised_of(cache.record_of(run), run)
+    if args.report:
+        envs = []
     for env in envs:
         for algo in algos:  # the files after each run, so a stopped study keeps what it finished
             run = run_dir(args.results, env, algo, args.seeds)
             summary = cache.ensure_run(config_of(env, algo, args.seeds), run)
             rows[env, algo] = row_of(env, algo, run, summary)
-            ordered = [rows[e, a] for e in ENVS for a in ALGOS if (e, a) in rows]
-            (out / "family.md").write_text(section(ordered))
-            common.write_json(record, {"machine": common.machine(), "rows": ordered})
-            curves(ordered, out / "family.png")
+            _write(out, rows)
+    _write(out, rows)
     print(f"wrote {out}/family.json, family.md and family.png")
     return 0
 
