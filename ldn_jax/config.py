@@ -346,13 +346,15 @@ class ModelConfig:
     lr: float = 1e-3
     """Adam learning rate of M1."""
     updates: int = 100
-    """Minibatch gradient steps on M1 per iteration (the paper: 100 per episode); not read
-    under `early_stop`."""
+    """Minibatch gradient steps on M1 per iteration (the paper: 100 per episode). Under
+    `early_stop`, the most one fit takes: it ends at the first epoch that reaches this many
+    steps, converged or not (0: no cap, MBPO's fit). MBPO's own code caps a fit by seconds
+    (`max_model_t`); a count of steps keeps a run's bits."""
     early_stop: bool = False
     """`probabilistic`: fit as MBPO does, toward convergence: epochs of one pass over R's
     training slots, until no member's error on held-out transitions has fallen by 1% for 5
-    epochs in a row (at most 1,000), each member back at its best
-    (`Dynamics.fit_until_stalled`)."""
+    epochs in a row (at most 1,000 epochs, and `updates` steps where that is not 0), each
+    member back at its best (`Dynamics.fit_until_stalled`)."""
     value_loss: float = 0.0
     """Weight of a value-equivalence term in M1's fit (ours, for studies, in the style of
     value-aware model learning, Farahmand et al. 2017): the squared difference between the

@@ -126,6 +126,9 @@ class EarlyStop:
     """A member gains where its held-out error falls by more than this share of its best."""
     max_epochs: int = 1000
     """The fit ends here whatever the errors do."""
+    max_steps: int = 0
+    """The fit ends at the first epoch that brings its minibatch steps to this many, whatever
+    the errors do (0: no cap)."""
 
 
 class Dynamics:
@@ -450,7 +453,8 @@ class Dynamics:
         transitions drawn once per fit. A member's parameters are
         kept as its best where its error falls by more than `stop.min_gain` of its best;
         the fit ends once no member has for more than `stop.patience` epochs in a row (or
-        after `stop.max_epochs`), each member back at its best, the elites ranked on those
+        after `stop.max_epochs`, or at the first epoch that brings its steps to
+        `stop.max_steps`), each member back at its best, the elites ranked on those
         errors. Returns the state, the last epoch's mean loss and the epochs taken."""
         if not self.probabilistic:
             raise ValueError("fit_until_stalled fits a probabilistic ensemble")
@@ -486,7 +490,10 @@ class Dynamics:
             stalled = jnp.where(gained.any(), 0, stalled + 1)
             return count + 1, stalled, params, opt_state, best, best_error, losses.mean(), key
 
-        going = lambda carry: (carry[0] < stop.max_epochs) & (carry[1] <= stop.patience)
+        capped = lambda count: count * steps < stop.max_steps if stop.max_steps else True
+        going = lambda carry: (
+            (carry[0] < stop.max_epochs) & (carry[1] <= stop.patience) & capped(carry[0])
+        )
         zero = jnp.zeros((), jnp.int32)
         start = (zero, zero, state.params, state.opt_state, state.params)
         start += (jnp.full((members,), jnp.inf), jnp.zeros(()), key)

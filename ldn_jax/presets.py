@@ -221,6 +221,9 @@ _MBPO = {
     "imagine.cut": 15,
     "imagine.real_share": 0.05,
     "model.early_stop": True,
+    # MBPO fits to convergence (15 to 100 epochs per fit here, each a pass over R): tens of
+    # hours per 100k-step seed on these 2 cores. A fit stops at 500 steps (docs/training.md).
+    "model.updates": 500,
     "model.ensemble": 7,
     "model.elites": 5,
     "model.hidden_layers": 4,

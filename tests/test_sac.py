@@ -340,6 +340,8 @@ def test_sac_model_runs_mbpos_schedule_and_sac_ldn_the_ld_draw():
     assert ldn.stop_rule == "ld" and ldn.imagine.cut == 15 and ldn.iteration_steps == 250
     cheetah = from_preset("branched", env="halfcheetah", algo="sac-model")
     assert cheetah.stop.horizon_max == 1 and cheetah.model.early_stop
+    # MBPO's fit to convergence, capped at 500 minibatch steps a fit on these cores
+    assert model.model.early_stop and model.model.updates == 500
 
 
 # -- a learned termination (imagine.termination "learned") --------------------------------------

@@ -16,7 +16,8 @@ Array = jax.Array
 def fit(parts: Parts, state: TrainState, real: Episodes, key: Array) -> tuple[TrainState, dict]:
     """The iteration's real steps (`[T, W, ...]`, those of weight > 0) into R, and
     `model.updates` minibatch steps of M1 on R (`model.early_stop`: MBPO's fit toward
-    convergence); the fit's metrics: `model_loss` (and `model_epochs` under early_stop)."""
+    convergence, at most `model.updates` steps where that is not 0); the fit's metrics:
+    `model_loss` (and `model_epochs` under early_stop)."""
     steps = real.steps
     flat = lambda x: x.reshape((-1, *x.shape[2:]))
     batch = Transitions(
@@ -33,7 +34,7 @@ def fit(parts: Parts, state: TrainState, real: Episodes, key: Array) -> tuple[Tr
     if parts.config.model.value_loss:
         value = lambda obs: parts.learner.value(state.learner.params, obs)
     if parts.config.model.early_stop:
-        stop = EarlyStop()
+        stop = EarlyStop(max_steps=parts.config.model.updates)
         model, loss, epochs = parts.dynamics.fit_until_stalled(state.model, buffer, key, stop)
         fitted = {"model_loss": loss, "model_epochs": epochs.astype(loss.dtype)}
     else:
