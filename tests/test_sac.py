@@ -1,6 +1,7 @@
 """SAC's pieces (`ldn_jax.learners.sac`): the squashed Gaussian's log-density, the three losses
 by hand, the Polyak step, and a one-step continuous bandit it must solve."""
 
+import dataclasses
 import math
 
 import jax
@@ -436,8 +437,22 @@ def test_the_study_pools_one_seed_runs_by_task_budget_and_label(tmp_path):
     assert done["met"] == (done["score"]["iqm"] >= 2300.0)
     study.report(tmp_path)
     table = (tmp_path / "sac" / "sac.md").read_text()
-    assert "| hopper | 200,000 | 5-9 | confirmatory |" in table
-    assert "| hopper | 200,000 | 0 | exploratory |" in table and "pending" in table
+    assert "| hopper | 200,000 | 5-9 | plan | confirmatory |" in table
+    assert "| hopper | 200,000 | 0 | plan | exploratory |" in table and "pending" in table
+    # another arm is exploratory on any seed, a row of its own, and its config is the plan's
+    # but for its fields
+    warm = {"task": "hopper", "seeds": [5], "steps": 200_000, "commits": ["abc1234"]}
+    warm |= {"env_steps_per_second": 30.0, "gymnasium": [[900.0]], "arm": "warmup"}
+    (arms / "hopper-sac-warmup-s5+1-200000.json").write_text(json.dumps(warm))
+    (other,) = [r for r in study.pooled(tmp_path) if r["arm"] == "warmup"]
+    assert other["label"] == "exploratory" and other["seeds"] == [5]
+    config, plan = study.config_of("hopper", 5, 1, arm="warmup"), study.config_of("hopper", 5, 1)
+    assert (config.sac.random_steps, config.sac.learning_starts) == (10_000, 10_000)
+    assert dataclasses.replace(config, sac=plan.sac) == plan
+    assert (
+        study.run_dir(tmp_path, "hopper", 5, 1, arm="warmup").name
+        == "hopper-sac-warmup-s5+1-200000"
+    )
 
 
 def test_the_rule_study_tests_once_every_seed_is_in_and_corrects_by_holm(tmp_path):

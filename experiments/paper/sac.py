@@ -2,7 +2,8 @@
 steps, halfcheetah and hopper at 200,000, seeds 5-9 (confirmatory) and 0-4 (exploratory),
 `ldn-jax --algo sac` as a user gets it.
 
-    python -m experiments.paper.sac [--tasks TASK,...] [--first-seed S] [--per-run N] [--report]
+    python -m experiments.paper.sac [--tasks TASK,...] [--first-seed S] [--per-run N]
+        [--arm plan|warmup] [--report]
     python -m experiments.paper.sac --side-by-side
 
 Trains every run (a vmapped program of `--per-run` seeds, one by default, so that each seed's
@@ -44,28 +45,47 @@ CONFIRMATORY = 5
 EPISODES = 10
 
 
+ARMS: dict[str, dict[str, object]] = {
+    "plan": {},
+    "warmup": {"sac.random_steps": 10_000, "sac.learning_starts": 10_000},
+}
+"""Arm -> fields over `--algo sac`'s defaults. "plan" is the plan's `sac` as a user gets it;
+"warmup" acts uniformly at random for the first 10,000 steps and updates from there, as SB3's
+SAC under the zoo's halfcheetah constants does (`learning_starts`), exploratory only."""
+
 SIDE_BY_SIDE = ("halfcheetah", 0, 1, 100_000)
 """Where ours runs beside SB3's SAC: task, first seed, seeds, steps."""
 
 
-def config_of(task: str, first_seed: int, seeds: int = SEEDS, steps: int | None = None) -> Config:
+def config_of(
+    task: str, first_seed: int, seeds: int = SEEDS, steps: int | None = None, arm: str = "plan"
+) -> Config:
     steps = steps or TASKS[task][0]
+    fields = ARMS[arm]
     return validate(
-        from_preset("paper", env=task, algo="sac", seeds=seeds, first_seed=first_seed, steps=steps)
+        from_preset(
+            "paper", env=task, algo="sac", seeds=seeds, first_seed=first_seed, steps=steps, **fields
+        )
     )
 
 
-def run_dir(results: Path, task: str, first_seed: int, seeds: int = SEEDS, steps=None) -> Path:
+def run_dir(
+    results: Path, task: str, first_seed: int, seeds: int = SEEDS, steps=None, arm: str = "plan"
+) -> Path:
     steps = steps or TASKS[task][0]
-    return results / "runs" / "sac" / f"{task}-sac-s{first_seed}+{seeds}-{steps}"
+    name = "sac" if arm == "plan" else f"sac-{arm}"
+    return results / "runs" / "sac" / f"{task}-{name}-s{first_seed}+{seeds}-{steps}"
 
 
-def ensure(task: str, first_seed: int, results: Path, code: str, seeds: int = SEEDS) -> None:
+def ensure(
+    task: str, first_seed: int, results: Path, code: str, seeds: int = SEEDS, arm: str = "plan"
+) -> None:
     """Train (or resume, or reuse) one run of `seeds` seeds, then replay it in gymnasium."""
-    config = config_of(task, first_seed, seeds)
-    out = run_dir(results, task, first_seed, seeds)
+    config = config_of(task, first_seed, seeds, arm=arm)
+    out = run_dir(results, task, first_seed, seeds, arm=arm)
     file = common.out_dir(results, "sac/arms") / f"{out.name}.json"
-    cache.ensure_replayed(config, out, file, {"task": task}, (code, EPISODES))
+    labels = {"task": task} if arm == "plan" else {"task": task, "arm": arm}
+    cache.ensure_replayed(config, out, file, labels, (code, EPISODES))
 
 
 def side_by_side(results: Path, code: str, load: str) -> None:
@@ -119,14 +139,17 @@ def side_lines(results: Path) -> list[str]:
 
 
 def pooled(results: Path) -> list[dict]:
-    """The replayed runs of `sac/arms/`, pooled by task, budget and label (seeds 0-4
-    exploratory, from `CONFIRMATORY` on confirmatory), in seed order."""
+    """The replayed runs of `sac/arms/`, pooled by task, budget, arm and label (seeds 0-4
+    and every arm but the plan's exploratory, the plan's from `CONFIRMATORY` on
+    confirmatory), in seed order."""
     groups: dict[tuple, list[dict]] = {}
     for data in cache.replayed(results / "sac" / "arms"):
-        label = "confirmatory" if data["seeds"][0] >= CONFIRMATORY else "exploratory"
-        groups.setdefault((data["task"], data["steps"], label), []).append(data)
+        arm = data.get("arm", "plan")
+        fresh = data["seeds"][0] >= CONFIRMATORY and arm == "plan"
+        label = "confirmatory" if fresh else "exploratory"
+        groups.setdefault((data["task"], data["steps"], arm, label), []).append(data)
     rows = []
-    for (task, steps, label), runs in sorted(groups.items()):
+    for (task, steps, arm, label), runs in sorted(groups.items()):
         runs.sort(key=lambda r: r["seeds"][0])
         pooled = cache.pool(runs)
         seeds, scores = pooled["seeds"], pooled["scores"]
@@ -136,6 +159,7 @@ def pooled(results: Path) -> list[dict]:
             {
                 "task": task,
                 "steps": steps,
+                "arm": arm,
                 "label": label,
                 "seeds": seeds,
                 "scores": scores,
@@ -158,7 +182,7 @@ def runs_of(results: Path, row: dict) -> list[Path]:
     where the directory is gone)."""
     firsts = np.cumsum([0, *row["seeds_per_run"][:-1]])
     return [
-        run_dir(results, row["task"], row["seeds"][i], n, row["steps"])
+        run_dir(results, row["task"], row["seeds"][i], n, row["steps"], row.get("arm", "plan"))
         for i, n in zip(firsts, row["seeds_per_run"], strict=True)
     ]
 
@@ -181,9 +205,9 @@ def report(results: Path) -> None:
         "A row with fewer than the plan's 5 seeds is pending: its target is not read. "
         "Env steps/s: per run (all of its seeds together), one figure per run.",
         "",
-        "| task | steps | seeds | label | greedy return | seeds at target | target | met | "
+        "| task | steps | seeds | arm | label | greedy return | seeds at target | target | met | "
         "env steps/s (seeds per run) | code |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         met = ("yes" if r["met"] else "no") if r["complete"] else "pending"
@@ -192,13 +216,14 @@ def report(results: Path) -> None:
             for v, n in zip(r["env_steps_per_second"], r["seeds_per_run"], strict=True)
         )
         lines.append(
-            f"| {r['task']} | {r['steps']:,} | {_seeds(r['seeds'])} | {r['label']} | "
+            f"| {r['task']} | {r['steps']:,} | {_seeds(r['seeds'])} | {r['arm']} | {r['label']} | "
             f"{stats.text(r['score'])} | {r['reached']} of {len(r['scores'])} | "
             f"{r['target']:,.0f} | {met} | {speed} | {', '.join(r['commits'])} |"
         )
     panels: dict[str, dict[str, list[Path]]] = {}
     for r in rows:
-        label = f"{r['label']}, seeds {_seeds(r['seeds'])}"
+        arm = "" if r["arm"] == "plan" else f"{r['arm']}, "
+        label = f"{arm}{r['label']}, seeds {_seeds(r['seeds'])}"
         panels.setdefault(r["task"], {})[label] = runs_of(results, r)
     levels = {task: target for task, (_, target) in TASKS.items()}
     title = "sac: training episode returns (trailing mean over 5% of the run)"
@@ -219,6 +244,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--per-run", type=int, help="seeds per vmapped run (default: PER_RUN's, by task)"
     )
+    parser.add_argument("--arm", default="plan", choices=list(ARMS), help="see ARMS")
     parser.add_argument("--report", action="store_true", help="train nothing; rebuild the report")
     parser.add_argument(
         "--side-by-side", action="store_true", help="ours where SB3's SAC ran (halfcheetah, 100k)"
@@ -240,7 +266,7 @@ def main(argv: list[str] | None = None) -> int:
         for task in tasks:
             per_run = args.per_run or PER_RUN[task]
             for first in range(args.first_seed, args.first_seed + SEEDS, per_run):
-                ensure(task, first, args.results, code, per_run)
+                ensure(task, first, args.results, code, per_run, args.arm)
                 report(args.results)
     report(args.results)
     return 0
