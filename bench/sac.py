@@ -110,7 +110,7 @@ def mbpo_fit_costs(seeds: int, env_name: str, rows: int = 20_000) -> dict:
     config = from_preset("branched", env=env_name, algo="sac-model", seeds=seeds)
     env, params = envs.make(env_name)
     obs, actions = env.observation_size(params), env.action_spec(params).size
-    dynamics = Dynamics(config.model, obs, actions)
+    dynamics = Dynamics(config.model, obs, actions, fit=config.fit)
     keys = jax.random.split(jax.random.key(0), seeds)
     states = jax.vmap(dynamics.init)(keys)
     data = _batch(jax.random.key(1), 1, rows, obs, actions)
@@ -127,14 +127,14 @@ def mbpo_fit_costs(seeds: int, env_name: str, rows: int = 20_000) -> dict:
     step_s = _best_seconds(timed, states, keys, repeats=3) / steps
     every, real = config.iteration_steps, 100_000
     epochs = EarlyStop().patience + 2  # the first epoch gains, then patience + 1 without
-    batches = lambda r: math.ceil(max(1.0, r * (1 - 1 / HOLDOUT_EVERY) / config.model.batch_size))
+    batches = lambda r: math.ceil(max(1.0, r * (1 - 1 / HOLDOUT_EVERY) / config.fit.batch_size))
     fits = [batches(every * i) for i in range(1, real // every + 1)]
     fit_steps = sum(epochs * b for b in fits)
-    cap = config.model.updates  # under early_stop: a fit ends at the first epoch past it
+    cap = config.fit.updates  # under early_stop: a fit ends at the first epoch past it
     capped = sum(math.ceil(cap / b) * b for b in fits) if cap else fit_steps
     return {
         "what": f"{members} members of {config.model.hidden_layers} x {config.model.hidden} "
-        f"{config.model.activation} units at batch {config.model.batch_size}, vmapped over "
+        f"{config.model.activation} units at batch {config.fit.batch_size}, vmapped over "
         f"{seeds} seeds; fits every {every} real steps: uncapped, {epochs} epochs each (MBPO's "
         f"least; runs here took 15-100), and capped at {cap} steps (every fit at its cap)",
         "ms_per_step_all_members": round(1e3 * step_s, 3),

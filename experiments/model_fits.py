@@ -3,7 +3,7 @@
     python -m experiments.model_fits RUN_DIR [--seeds N] [--starts N] [--out FILE]
 
 RUN_DIR is a finished branched run (its final checkpoint holds each seed's real buffer R and
-the model the preset fitted through the run: `model.updates` steps after every iteration).
+the model the preset fitted through the run: `fit.updates` steps after every iteration).
 For each of its first N seeds s, a fresh ensemble of the same architecture is fitted on
 seed s's final R as MBPO fits it (`Dynamics.fit_until_stalled`: epochs of one pass over the
 training slots until no member gains 1% for 5 epochs). Both models are then scored on data

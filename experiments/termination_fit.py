@@ -6,7 +6,7 @@ test, on real data.
 RUN_DIR is a finished model-based run (its final checkpoint holds each seed's real buffer R).
 Each row of R is labelled by the task's own test on its next observation (what the trainer's
 default, "known", reads). For each of the first N seeds s, a fresh classifier (the one the
-trainer keeps beside the model) is fitted on seed s's R: `--fits` fits of `model.updates`
+trainer keeps beside the model) is fitted on seed s's R: `--fits` fits of `fit.updates`
 steps each, as a run makes one per iteration. It is scored on the next seed's R, data it never
 saw: the share of terminal rows it calls terminal (recall), the share of the others it calls
 alive (specificity), and the rows of each kind. Writes a JSON document (stdout, and --out).
@@ -59,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     if config.seeds < 2:
         raise SystemExit("error: the scores read the next seed's buffer: the run needs 2 seeds")
     obs_size = trainer.obs_size
-    dynamics = Dynamics(config.model, obs_size, trainer.model_action_size, "learned")
+    dynamics = Dynamics(config.model, obs_size, trainer.model_action_size, "learned", config.fit)
     is_terminal = trainer.parts.real.is_terminal
     fit = jax.jit(dynamics.fit_termination)
     rows = []
@@ -78,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
                 "seed": config.first_seed + seed,
                 "test_seed": config.first_seed + seed + 1,
                 "fits": args.fits,
-                "adam_steps": args.fits * config.model.updates,
+                "adam_steps": args.fits * config.fit.updates,
                 "final_loss": float(loss),
                 "train": score(dynamics, state, buffer),
                 "test": score(dynamics, state, test),

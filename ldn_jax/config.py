@@ -273,8 +273,8 @@ class SACConfig:
 
 @dataclass(frozen=True)
 class ModelConfig:
-    """The dynamics model M1, its frozen twin M0, how M1 is fitted and how its learning
-    degree is read."""
+    """The dynamics model M1, its frozen twin M0 and how its learning degree is read (how M1
+    is fitted: `FitConfig`)."""
 
     ld: str = "m0"
     """Learning-degree estimator, one of `LD_ESTIMATORS`: "m0" compares M1 with M0 (eq. 3-6;
@@ -343,24 +343,6 @@ class ModelConfig:
     refreshed before each fit): for MuJoCo's 11- to 27-dimensional observations."""
     init_std: float = 0.1
     """Standard deviation of the normal weight initialiser of M1 (and so of M0)."""
-    lr: float = 1e-3
-    """Adam learning rate of M1."""
-    updates: int = 100
-    """Minibatch gradient steps on M1 per iteration (the paper: 100 per episode). Under
-    `early_stop`, the most one fit takes: it ends at the first epoch that reaches this many
-    steps, converged or not (0: no cap, MBPO's fit). MBPO's own code caps a fit by seconds
-    (`max_model_t`); a count of steps keeps a run's bits."""
-    early_stop: bool = False
-    """`probabilistic`: fit as MBPO does, toward convergence: epochs of one pass over R's
-    training slots, until no member's error on held-out transitions has fallen by 1% for 5
-    epochs in a row (at most 1,000 epochs, and `updates` steps where that is not 0), each
-    member back at its best (`Dynamics.fit_until_stalled`)."""
-    value_loss: float = 0.0
-    """Weight of a value-equivalence term in M1's fit (ours, for studies, in the style of
-    value-aware model learning, Farahmand et al. 2017): the squared difference between the
-    learner's critic at the predicted (mean) next observation and at the real one, over the
-    critic's variance on the batch's real next observations, added to each step's loss. It
-    asks the model to be right where the critic at a branch's cut reads it. 0: off."""
     penalty: float = 0.0
     """Pessimism (MOPO's reward penalty, Yu et al. 2020, read on our estimator): each imagined
     reward minus `penalty` times the step's uncertainty, the ensemble estimator's statistic
@@ -371,8 +353,6 @@ class ModelConfig:
     on terminal steps. It lowers the value
     of states the model is unsure of, where a policy would otherwise exploit its errors.
     0: off."""
-    batch_size: int = 64
-    """Minibatch size of each model step, drawn uniformly from the real buffer."""
     buffer_capacity: int = 50_000
     """Real transitions kept per seed and K (a ring buffer: the oldest are overwritten)."""
     support: float | None = None
@@ -381,6 +361,37 @@ class ModelConfig:
     by this fraction of the box's width; None: never. M1 is fitted on real transitions
     only, so outside that box its prediction is extrapolation (the paper's linear nets drive
     inverted_pendulum's cart through its rails: docs/defaults.md)."""
+
+
+@dataclass(frozen=True)
+class FitConfig:
+    """How M1 is fitted on R (the model's stage): its optimiser, its steps, MBPO's early
+    stopping. Split from `ModelConfig` on 2026-12-07; `model.lr` and the others still read."""
+
+    lr: float = 1e-3
+    """Adam learning rate of M1."""
+    updates: int = 100
+    """Minibatch gradient steps on M1 per iteration (the paper: 100 per episode). Under
+    `early_stop`, the most one fit takes: it ends at the first epoch that reaches this many
+    steps, converged or not (0: no cap, MBPO's fit). MBPO's own code caps a fit by seconds
+    (`max_model_t`); a count of steps keeps a run's bits."""
+    early_stop: bool = False
+    """`model.probabilistic`: fit as MBPO does, toward convergence: epochs of one pass over R's
+    training slots, until no member's error on held-out transitions has fallen by 1% for 5
+    epochs in a row (at most 1,000 epochs, and `updates` steps where that is not 0), each
+    member back at its best (`Dynamics.fit_until_stalled`)."""
+    value_loss: float = 0.0
+    """Weight of a value-equivalence term in M1's fit (ours, for studies, in the style of
+    value-aware model learning, Farahmand et al. 2017): the squared difference between the
+    learner's critic at the predicted (mean) next observation and at the real one, over the
+    critic's variance on the batch's real next observations, added to each step's loss. It
+    asks the model to be right where the critic at a branch's cut reads it. 0: off."""
+    batch_size: int = 64
+    """Minibatch size of each model step, drawn uniformly from the real buffer."""
+    weight_decay: float = 0.0
+    """L2 penalty on M1's weights: this times half the sum of the squares of every layer's
+    kernel (not its biases) is added to each step's loss, one value for all layers (MBPO
+    weighs its layers 2.5e-5 at the input to 1e-4 at the output). 0: off."""
 
 
 @dataclass(frozen=True)
@@ -515,7 +526,7 @@ class ImagineConfig:
     the task's own test on the predicted observation (MBPO's static functions; halfcheetah
     never terminates); "learned": a classifier of the next observation fitted beside M1 on
     the real buffer's terminations (a class-balanced cross-entropy, as many Adam steps as
-    `model.updates`; `Dynamics.fit_termination`), for tasks whose test is not known. The real
+    `fit.updates`; `Dynamics.fit_termination`), for tasks whose test is not known. The real
     buffer then keeps each row's termination."""
 
 
@@ -593,7 +604,7 @@ class Config:
     """Iterations per compiled chunk: the host logs and checkpoints between chunks (MuJoCo
     tasks: 1, an iteration there is long)."""
     sweep: tuple[tuple[str, tuple[float, ...]], ...] = ()
-    """A grid of float fields, `((name, values), ...)` (`agent.actor_lr`, `model.lr`, ...: one
+    """A grid of float fields, `((name, values), ...)` (`agent.actor_lr`, `fit.lr`, ...: one
     of `SWEEPABLE`): every combination of the values, for every K, is one point of the
     vmapped program (`points`), so a sweep compiles once. Empty: no sweep."""
     agent: AgentConfig = field(default_factory=AgentConfig)
@@ -601,6 +612,7 @@ class Config:
     ppo: PPOConfig = field(default_factory=PPOConfig)
     sac: SACConfig = field(default_factory=SACConfig)
     model: ModelConfig = field(default_factory=ModelConfig)
+    fit: FitConfig = field(default_factory=FitConfig)
     stop: StopConfig = field(default_factory=StopConfig)
     imagine: ImagineConfig = field(default_factory=ImagineConfig)
 
@@ -768,6 +780,7 @@ SECTIONS = {
     "ppo": PPOConfig,
     "sac": SACConfig,
     "model": ModelConfig,
+    "fit": FitConfig,
     "stop": StopConfig,
     "imagine": ImagineConfig,
 }
@@ -797,13 +810,16 @@ _MOVED_IMAGINE = {
     "imagined_actor_step": "actor_step",
     "imagined_epochs": "epochs",
 }
+_MOVED_FIT = ("lr", "updates", "early_stop", "batch_size", "value_loss")
 ALIASES: dict[str, str] = {
     "model.stop": "stop.rule",
     **{f"model.{name}": f"stop.{name}" for name in _MOVED_STOP},
     **{f"model.{old}": f"imagine.{new}" for old, new in _MOVED_IMAGINE.items()},
     **{f"agent.{name}": f"ppo.{name}" for name in (f.name for f in dataclasses.fields(PPOConfig))},
+    **{f"model.{name}": f"fit.{name}" for name in _MOVED_FIT},
 }
 """The dotted names of fields that moved when `ModelConfig` and `AgentConfig` were split
+(`model.lr` is `fit.lr` since 2026-12-07)
 (`model.imagine_start` is `imagine.start`): `--set`, `--config`, `--sweep`, `--explain`
 and a run directory's config.json from before still read them."""
 
@@ -874,7 +890,7 @@ def _flat(overrides: dict) -> dict[str, object]:
         if name in SECTIONS:
             flat |= {canonical(f"{name}.{sub}"): v for sub, v in dict(value).items()}
         else:
-            flat[name] = value
+            flat[canonical(name)] = value
     return flat
 
 
@@ -918,7 +934,7 @@ docs' field table lists them, and a test checks each flag's help names them all)
 
 
 def fields() -> dict[str, FieldType]:
-    """Every setting of a run by its dotted name (`seeds`, `agent.actor_lr`, `model.lr`), in
+    """Every setting of a run by its dotted name (`seeds`, `agent.actor_lr`, `fit.lr`), in
     declaration order, read off the dataclasses' annotations: the one table `--set`,
     `--config` and the CLI's own flags resolve names against. `preset` is not a setting
     (it names where the defaults came from)."""
@@ -937,8 +953,9 @@ def sweepable() -> tuple[str, ...]:
     reads as a number. Not: K (`k` is its own axis), `threshold` (read by the host, after
     training), the initialisers' `init_std` and `log_std_init` (read where the parameters
     are made; `init_std` shapes the network modules), the branched imagination's
-    `ratio` and `real_share` (they size its batches), the model's `value_loss` (it
-    decides whether the fit reads the critic), and every int, bool or str field
+    `ratio` and `real_share` (they size its batches), the fit's `value_loss` (it
+    decides whether the fit reads the critic) and `weight_decay` (whether the loss carries
+    the penalty), and every int, bool or str field
     (sizes, counts, choices: they change the program's shapes or code, so they need separate
     runs)."""
     excluded = {
@@ -948,7 +965,8 @@ def sweepable() -> tuple[str, ...]:
         "agent.log_std_init",
         "imagine.ratio",
         "imagine.real_share",
-        "model.value_loss",
+        "fit.value_loss",
+        "fit.weight_decay",
     }
     return tuple(
         name
@@ -1192,16 +1210,20 @@ def _model_checks(config: Config) -> list[tuple[bool, str]]:
         (model.hidden >= 1, f"model hidden must be >= 1, got {model.hidden}"),
         (model.init_std > 0, f"model init_std must be > 0, got {model.init_std}"),
         (config.model.activation in ACTIVATIONS, f"model activation must be one of {ACTIVATIONS}"),
-        (config.model.lr > 0, "model lr must be > 0"),
-        (config.model.updates >= 0, "model updates must be >= 0"),
+        (config.fit.lr > 0, "fit lr must be > 0"),
+        (config.fit.updates >= 0, "fit updates must be >= 0"),
         (
-            config.model.value_loss >= 0,
-            f"model value_loss must be >= 0, got {config.model.value_loss}",
+            config.fit.value_loss >= 0,
+            f"fit value_loss must be >= 0, got {config.fit.value_loss}",
         ),
-        (config.model.batch_size >= 1, "model batch_size must be >= 1"),
         (
-            not model.early_stop or model.probabilistic,
-            "model.early_stop fits a probabilistic ensemble: it needs model.probabilistic",
+            config.fit.weight_decay >= 0 and math.isfinite(config.fit.weight_decay),
+            f"fit weight_decay must be >= 0 and finite, got {config.fit.weight_decay}",
+        ),
+        (config.fit.batch_size >= 1, "fit batch_size must be >= 1"),
+        (
+            not config.fit.early_stop or model.probabilistic,
+            "fit.early_stop fits a probabilistic ensemble: it needs model.probabilistic",
         ),
         (config.model.buffer_capacity >= 1, "buffer_capacity must be >= 1"),
         (config.model.ensemble >= 2, f"ensemble size must be >= 2, got {config.model.ensemble}"),

@@ -23,7 +23,7 @@ from ldn_jax.buffer import (
     buffer_sample,
     buffer_sample_split,
 )
-from ldn_jax.config import ModelConfig
+from ldn_jax.config import FitConfig, ModelConfig
 from ldn_jax.networks import MLP, DynamicsModel, GaussianDynamicsModel
 
 Array = jax.Array
@@ -116,6 +116,14 @@ def action_encoder(encoding: str, policy, action_spec) -> tuple:
     return lambda action: jnp.asarray(forces, jnp.float32)[action][..., None], 1
 
 
+def kernel_norm(params: dict) -> Array:
+    """Half the sum of the squares of every kernel in `params` (biases and the log-variance
+    bounds left out): the L2 penalty `FitConfig.weight_decay` weighs."""
+    leaves = jax.tree_util.tree_leaves_with_path(params)
+    kernels = [x for path, x in leaves if getattr(path[-1], "key", None) == "kernel"]
+    return 0.5 * sum(jnp.sum(jnp.square(x)) for x in kernels)
+
+
 @dataclass(frozen=True)
 class EarlyStop:
     """When `Dynamics.fit_until_stalled` ends (MBPO's: patience 5, a 1% gain)."""
@@ -135,11 +143,17 @@ class Dynamics:
     """Pure functions over `ModelState` for one observation/action size; holds no state."""
 
     def __init__(
-        self, config: ModelConfig, obs_size: int, action_size: int, termination: str = "known"
+        self,
+        config: ModelConfig,
+        obs_size: int,
+        action_size: int,
+        termination: str = "known",
+        fit: FitConfig | None = None,
     ):
         """`termination`: "learned" keeps a termination classifier beside M1
-        (`ImagineConfig.termination`)."""
+        (`ImagineConfig.termination`); `fit`: how M1 is fitted (`FitConfig`'s defaults)."""
         self.config, self.termination = config, termination
+        self.fitting = fit if fit is not None else FitConfig()
         self.obs_size = obs_size
         self.action_size = action_size
         if config.probabilistic:
@@ -157,7 +171,7 @@ class Dynamics:
                 init_std=config.init_std,
                 predict_delta=config.predict_delta,
             )
-        self.optimizer = optax.adam(config.lr)
+        self.optimizer = optax.adam(self.fitting.lr)
         self.termination_net = MLP(config.hidden, 1, "swish", 0.0, TERMINATION_LAYERS, "fan_in")
 
     @property
@@ -240,7 +254,7 @@ class Dynamics:
 
         def update(carry, key: Array):
             params, opt_state = carry
-            batch = buffer_sample(buffer, key, self.config.batch_size)
+            batch = buffer_sample(buffer, key, self.fitting.batch_size)
             loss, grads = jax.value_and_grad(self.termination_loss)(
                 params, state.stats, batch, share
             )
@@ -248,9 +262,9 @@ class Dynamics:
             return (optax.apply_updates(params, updates), opt_state), loss
 
         done = state.termination
-        keys = jax.random.split(key, self.config.updates)
+        keys = jax.random.split(key, self.fitting.updates)
         (params, opt_state), losses = jax.lax.scan(update, (done.params, done.opt_state), keys)
-        loss = losses.mean() if self.config.updates else jnp.zeros(())
+        loss = losses.mean() if self.fitting.updates else jnp.zeros(())
         return state.replace(termination=Termination(params, opt_state)), loss
 
     def predict_normalized(
@@ -320,7 +334,8 @@ class Dynamics:
         stats: Normalizer | None = None,
         value: Callable[[Array], Array] | None = None,
     ) -> tuple[Array, Array]:
-        """`(loss, fit)`: `loss` as above, and `fit` the same without the value term."""
+        """`(loss, fit)`: `loss` as above (with `FitConfig.weight_decay`'s penalty), and `fit`
+        the same without the value term."""
         stats = stats if stats is not None else self.init_stats()
         target = self.target(batch, stats)
         if self.probabilistic:
@@ -330,9 +345,11 @@ class Dynamics:
             loss = gaussian_nll(mean, log_var, target) + BOUND_PENALTY * gap
         else:
             loss = self.squared_error(params, batch, stats)
-        if value is None or not self.config.value_loss:
+        if self.fitting.weight_decay:
+            loss = loss + self.fitting.weight_decay * kernel_norm(params)
+        if value is None or not self.fitting.value_loss:
             return loss, loss
-        return loss + self.config.value_loss * self.value_error(params, batch, stats, value), loss
+        return loss + self.fitting.value_loss * self.value_error(params, batch, stats, value), loss
 
     def value_error(
         self, params: dict, batch: Transitions, stats: Normalizer, value: Callable[[Array], Array]
@@ -433,7 +450,7 @@ class Dynamics:
         loss = losses.mean()
         if self.probabilistic:
             return self._rank(state.replace(params=params, opt_state=opt_state), buffer, key), loss
-        error_scale = loss if self.config.updates else state.error_scale
+        error_scale = loss if self.fitting.updates else state.error_scale
         return state.replace(params=params, opt_state=opt_state, error_scale=error_scale), loss
 
     def _refreshed(self, state: ModelState, buffer: Buffer) -> ModelState:
@@ -466,7 +483,7 @@ class Dynamics:
         fit = jax.vmap(self._pass, (0, 0, None, None, 0, None))
         members = self.config.ensemble
         # an epoch is a pass over the training slots (MBPO's), in minibatches
-        training = jnp.ceil(buffer.size * (1.0 - 1.0 / HOLDOUT_EVERY) / self.config.batch_size)
+        training = jnp.ceil(buffer.size * (1.0 - 1.0 / HOLDOUT_EVERY) / self.fitting.batch_size)
         steps = jnp.maximum(training, 1.0).astype(jnp.int32)
 
         def epoch(carry):
@@ -511,7 +528,7 @@ class Dynamics:
         held = buffer_sample_split(buffer, jax.random.fold_in(key, 1), HOLDOUT_BATCH, True)
         errors = jax.vmap(self.squared_error, (0, None, None))(state.params, held, state.stats)
         elites = jnp.argsort(errors, stable=True)[: self.elite_count].astype(jnp.int32)
-        if not self.config.updates:
+        if not self.fitting.updates:
             return state
         return state.replace(elites=elites, error_scale=errors[elites].mean())
 
@@ -527,9 +544,9 @@ class Dynamics:
         """One model's `config.updates` steps: its new params, Adam state and mean loss (eq.
         2's or the NLL, without the value-equivalence term, which only its gradient takes)."""
         update = self._step(stats, buffer, value)
-        keys = jax.random.split(key, self.config.updates)
+        keys = jax.random.split(key, self.fitting.updates)
         (params, opt_state), losses = jax.lax.scan(update, (params, opt_state), keys)
-        return params, opt_state, losses.mean() if self.config.updates else jnp.zeros(())
+        return params, opt_state, losses.mean() if self.fitting.updates else jnp.zeros(())
 
     def _pass(
         self,
@@ -561,9 +578,9 @@ class Dynamics:
         def update(carry, key: Array):
             params, opt_state = carry
             if self.probabilistic:  # the held-out slots rank the members
-                batch = buffer_sample_split(buffer, key, self.config.batch_size, False)
+                batch = buffer_sample_split(buffer, key, self.fitting.batch_size, False)
             else:
-                batch = buffer_sample(buffer, key, self.config.batch_size)
+                batch = buffer_sample(buffer, key, self.fitting.batch_size)
             objective = lambda p: self.losses(p, batch, stats, value)
             (_, loss), grads = jax.value_and_grad(objective, has_aux=True)(params)
             updates, opt_state = self.optimizer.update(grads, opt_state, params)

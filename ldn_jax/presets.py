@@ -21,7 +21,7 @@ with the measurements that chose it, is in the docs (`docs/defaults.md`).
 
 from __future__ import annotations
 
-MODEL_SECTIONS = ("model.", "stop.", "imagine.")
+MODEL_SECTIONS = ("model.", "fit.", "stop.", "imagine.")
 """The sections of imagination's settings: a preset's apply to model-based algorithms only."""
 
 Layer = tuple[str, dict[str, object]]
@@ -220,10 +220,10 @@ _MBPO = {
     "imagine.branches": 5000,
     "imagine.cut": 15,
     "imagine.real_share": 0.05,
-    "model.early_stop": True,
+    "fit.early_stop": True,
     # MBPO fits to convergence (15 to 100 epochs per fit here, each a pass over R): tens of
     # hours per 100k-step seed on these 2 cores. A fit stops at 500 steps (docs/training.md).
-    "model.updates": 500,
+    "fit.updates": 500,
     "model.ensemble": 7,
     "model.elites": 5,
     "model.hidden_layers": 4,
@@ -244,8 +244,8 @@ PRESETS["branched"] = {
     "model.hidden": 200,
     "model.hidden_layers": 3,
     "model.activation": "swish",
-    "model.batch_size": 256,
-    "model.updates": 50,
+    "fit.batch_size": 256,
+    "fit.updates": 50,
     "model.buffer_capacity": 200_000,
     "imagine.branches": 32,
     "imagine.ratio": 4.0,

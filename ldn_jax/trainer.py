@@ -5,7 +5,7 @@ when the trainer was built:
 1. real play: each of W workers plays one real episode, the learner updating every n steps
    (schedule "episodes"; under "steps" each plays `iteration_steps` steps instead, its
    episodes carrying over between iterations);
-2. the model's fit: M1 takes `model.updates` minibatch steps on the real buffer;
+2. the model's fit: M1 takes `fit.updates` minibatch steps on the real buffer;
 3. imagination: each worker plays one episode in M1 from a fresh initial state; or, with
    `imagine.start = "real"` (ours), many short branches in M1 from states of the real
    buffer, the learner updating on full batches of them.

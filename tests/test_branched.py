@@ -2,6 +2,7 @@
 rules the field uses (MBPO's horizon schedule, MACURA's adaptive cut): hand-made numbers and
 buffers, one short run, and the config's refusals."""
 
+import dataclasses
 import json
 import math
 
@@ -18,7 +19,7 @@ from ldn_jax.buffer import (
     buffer_sample_recent,
     buffer_sample_split,
 )
-from ldn_jax.config import ImagineConfig, ModelConfig, StopConfig, from_preset, validate
+from ldn_jax.config import FitConfig, ImagineConfig, ModelConfig, StopConfig, from_preset, validate
 from ldn_jax.dynamics import Dynamics, gaussian_nll
 from ldn_jax.host import flags
 from ldn_jax.host.settings import UsageError
@@ -37,6 +38,16 @@ BRANCHED = {
     "updates": 5,
 }
 """A small probabilistic ensemble for CartPole (3 members, 2 elites)."""
+
+
+def _dynamics(model: dict, obs_size: int, action_size: int) -> Dynamics:
+    """`Dynamics` of a dict of `ModelConfig`'s and `FitConfig`'s fields (as `--set model.X`
+    reads them)."""
+    fits = {f.name for f in dataclasses.fields(FitConfig)}
+    fit = FitConfig(**{k: v for k, v in model.items() if k in fits})
+    own = ModelConfig(**{k: v for k, v in model.items() if k not in fits})
+    return Dynamics(own, obs_size, action_size, fit=fit)
+
 
 BRANCHES = {"start": "real", "branches": 6, "ratio": 2.0, "cut": 4}
 """Its branches: 6 side by side, cut after 4 steps, 2 imagined steps per real one."""
@@ -86,9 +97,9 @@ def test_the_gaussian_nll_matches_a_hand_computed_value():
 
 
 def test_the_value_equivalence_term_is_the_critics_error_at_the_predicted_next_state():
-    """`model.value_loss`: the fit's loss gains w x mean((V(predicted s') - V(s'))^2) / var
+    """`fit.value_loss`: the fit's loss gains w x mean((V(predicted s') - V(s'))^2) / var
     V(s'), and with it a gradient that the NLL alone does not have."""
-    dynamics = Dynamics(ModelConfig(**{**BRANCHED, "value_loss": 2.0}), 4, 2)
+    dynamics = _dynamics({**BRANCHED, "value_loss": 2.0}, 4, 2)
     params = jax.tree.map(lambda x: x[0], dynamics.init(jax.random.key(0)).params)
     k = jax.random.split(jax.random.key(1), 4)
     batch = Transitions(
@@ -145,7 +156,7 @@ def test_the_held_out_slots_are_never_drawn_for_the_fit():
 
 
 def test_elites_are_the_members_with_the_lowest_held_out_error():
-    dynamics = Dynamics(ModelConfig(**{**BRANCHED, "elites": 2, "ensemble": 4}), 4, 2)
+    dynamics = _dynamics({**BRANCHED, "elites": 2, "ensemble": 4}, 4, 2)
     state = dynamics.init(jax.random.key(0))
     # Zero every weight (each member predicts no change), then give member i a constant
     # reward: its held-out squared error on still transitions of reward 0 grows with |bias|.
@@ -167,7 +178,7 @@ def test_the_mean_imagined_step_is_the_elites_mean_and_draws_nothing():
     obs, action = jax.random.normal(jax.random.key(2), (7, 4)), jnp.ones((7, 2))
     steps = {}
     for step in ("sample", "mean"):
-        dynamics = Dynamics(ModelConfig(**{**BRANCHED, "imagined_step": step}), 4, 2)
+        dynamics = _dynamics({**BRANCHED, "imagined_step": step}, 4, 2)
         state = dynamics.init(jax.random.key(0))
         state = state.replace(elites=jnp.array([2, 0], jnp.int32))
         steps[step] = [
@@ -503,7 +514,7 @@ def test_the_m0_reading_of_a_probabilistic_ensemble_is_eq3_on_the_drawn_member()
     mean against its own initial copy; 0 (so P(stop) 1) while M1 is M0."""
     from ldn_jax.imagination import LD_ESTIMATES
 
-    dynamics = Dynamics(ModelConfig(**{**BRANCHED, "ld": "m0"}), 4, 2)
+    dynamics = _dynamics({**BRANCHED, "ld": "m0"}, 4, 2)
     assert dynamics.ensemble  # a probabilistic model is always an ensemble
     model = dynamics.init(jax.random.key(0))
     obs, action = jax.random.normal(jax.random.key(1), (8, 4)), jnp.ones((8, 2))
@@ -594,7 +605,7 @@ def test_the_fit_until_stalled_stops_on_the_held_out_error_and_keeps_each_member
     from ldn_jax.dynamics import HOLDOUT_BATCH, EarlyStop
 
     model = {**BRANCHED, "hidden": 32, "updates": 25, "lr": 3e-3, "normalize": True}
-    dynamics = Dynamics(ModelConfig(**model), 2, 1)
+    dynamics = _dynamics(model, 2, 1)
     k = jax.random.split(jax.random.key(0), 3)
     obs = jax.random.normal(k[0], (500, 2))
     action = jax.random.uniform(k[1], (500, 1), minval=-1.0, maxval=1.0)
@@ -622,7 +633,7 @@ def test_the_fit_until_stalled_stops_on_the_held_out_error_and_keeps_each_member
     assert float(fitted.error_scale) == pytest.approx(elite.mean(), rel=1e-5)
     first = jax.vmap(dynamics.squared_error, (0, None, None))(once.params, held, once.stats)
     assert elite.mean() < 0.5 * float(np.asarray(first).mean())
-    # a cap of steps (`model.updates` under early_stop) ends it at the first epoch that
+    # a cap of steps (`fit.updates` under early_stop) ends it at the first epoch that
     # reaches the cap, before it would have stalled
     per_epoch = -(-450 // dynamics.config.batch_size)  # 500 rows, one slot in 10 held out
     _, _, capped = fit(

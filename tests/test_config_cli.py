@@ -56,7 +56,8 @@ def test_the_field_table_is_read_off_the_dataclasses():
         ("agent.terminal_reward=none", "agent.terminal_reward", None),
         ("agent.terminal_reward=-5", "agent.terminal_reward", -5.0),
         ("model.activation=relu", "model.activation", "relu"),
-        ("model.lr=0.01", "model.lr", 0.01),
+        ("model.lr=0.01", "fit.lr", 0.01),  # the name from before the split
+        ("fit.weight_decay=1e-4", "fit.weight_decay", 1e-4),
         ("k=0.5,2", "k", (0.5, 2.0)),
         ("threshold=120", "threshold", 120.0),
         ("moving_decay=0.9", "moving_decay", 0.9),
@@ -86,7 +87,8 @@ def test_set_over_the_presets_and_per_learner_defaults():
         (["--set", "agent.normalize_obs=maybe"], "agent.normalize_obs takes bool"),
         (["--set", "agent.gamma=none"], "agent.gamma takes float, got 'none'"),
         (["--set", "agent.gamma=2"], "gamma must be in (0, 1], got 2.0"),
-        (["--set", "model.lr=-1"], "model lr must be > 0"),
+        (["--set", "model.lr=-1"], "fit lr must be > 0"),
+        (["--set", "fit.weight_decay=-1"], "fit weight_decay must be >= 0 and finite, got -1"),
         (["--algo", "ppo", "--set", "ppo.target_kl=0"], "target_kl must be > 0 (or None"),
         (["--algo", "ppo", "--set", "agent.obs_clip=0"], "obs_clip must be > 0, got 0"),
         (["--set", "actor_lr"], "--set needs FIELD=VALUE"),
@@ -164,7 +166,7 @@ def test_resume_refuses_settings_that_differ(tmp_path):
     path.write_text(json.dumps(stored.to_dict()))
     check("--config", str(path))
     path.write_text(json.dumps({"model": {"lr": 0.5}}))
-    with pytest.raises(UsageError, match=r"model\.lr = 0\.001"):
+    with pytest.raises(UsageError, match=r"fit\.lr = 0\.001"):
         check("--config", str(path))
 
 

@@ -7,7 +7,7 @@ import pytest
 
 from ldn_jax import envs
 from ldn_jax.buffer import Transitions, buffer_add, buffer_init
-from ldn_jax.config import ModelConfig
+from ldn_jax.config import FitConfig, ModelConfig
 from ldn_jax.dynamics import Dynamics
 from ldn_jax.learners.a2c import n_step_targets
 from ldn_jax.learners.base import worker_mean
@@ -130,7 +130,8 @@ def _cartpole_transitions(key, n):
 
 @pytest.mark.parametrize("activation", ["linear", "relu"])
 def test_model_fit_lowers_held_out_mse(activation):
-    dynamics = Dynamics(ModelConfig(activation=activation, updates=300), obs_size=4, action_size=2)
+    model, fit = ModelConfig(activation=activation), FitConfig(updates=300)
+    dynamics = Dynamics(model, obs_size=4, action_size=2, fit=fit)
     state = dynamics.init(jax.random.key(0))
     train = _cartpole_transitions(jax.random.key(1), 4096)
     held_out = _cartpole_transitions(jax.random.key(2), 1024)
@@ -161,3 +162,24 @@ def test_the_others_compile_without_them_where_the_session_chose_so():
         pytest.skip("the caller chose JAX_DISABLE_MOST_OPTIMIZATIONS for the whole session")
     assert jax.config.values["jax_disable_most_optimizations"]
     assert os.environ["JAX_DISABLE_MOST_OPTIMIZATIONS"] == "1"
+
+
+@pytest.mark.parametrize("probabilistic", [False, True])
+def test_weight_decay_adds_half_its_weight_times_the_kernels_squares(probabilistic):
+    # MBPO's L2 on the model's weights (`fit.weight_decay`): kernels only, by hand
+    from ldn_jax.dynamics import kernel_norm
+
+    model = ModelConfig(probabilistic=probabilistic, ensemble=2, hidden=8, hidden_layers=2)
+    plain = Dynamics(model, obs_size=4, action_size=2)
+    decayed = Dynamics(model, obs_size=4, action_size=2, fit=FitConfig(weight_decay=1e-3))
+    params = plain.init(jax.random.key(0)).params
+    if probabilistic:  # one member
+        params = jax.tree.map(lambda x: x[0], params)
+    batch = _cartpole_transitions(jax.random.key(1), 64)
+    leaves = jax.tree_util.tree_leaves_with_path(params)
+    kernels = [x for path, x in leaves if path[-1].key == "kernel"]
+    assert len(kernels) >= 2 and len(kernels) < len(leaves)  # biases (and bounds) left out
+    by_hand = 0.5 * sum(float(jnp.sum(x**2)) for x in kernels)
+    assert float(kernel_norm(params)) == pytest.approx(by_hand, rel=1e-6)
+    gap = float(decayed.loss(params, batch)) - float(plain.loss(params, batch))
+    assert gap == pytest.approx(1e-3 * by_hand, rel=1e-4)

@@ -13,7 +13,15 @@ import pytest
 
 from ldn_jax import load_policy
 from ldn_jax.buffer import buffer_add, buffer_init
-from ldn_jax.config import AgentConfig, Config, ModelConfig, StopConfig, from_preset, validate
+from ldn_jax.config import (
+    AgentConfig,
+    Config,
+    FitConfig,
+    ModelConfig,
+    StopConfig,
+    from_preset,
+    validate,
+)
 from ldn_jax.dynamics import Dynamics, ModelState
 from ldn_jax.host import checkpoint
 from ldn_jax.host.run_dir import FINAL as FINAL_CHECKPOINT
@@ -110,10 +118,9 @@ def test_members_start_apart_and_m0_copies_them():
 @pytest.mark.optimized
 def test_vmapped_fit_equals_each_member_fitted_alone():
     members, updates = 3, 20
-    ensemble = Dynamics(
-        ModelConfig(ld="ensemble", ensemble=members, updates=updates, normalize=True), 4, 2
-    )
-    single = Dynamics(ModelConfig(updates=updates, normalize=True), 4, 2)
+    fit = FitConfig(updates=updates)
+    ensemble = Dynamics(ModelConfig(ld="ensemble", ensemble=members, normalize=True), 4, 2, fit=fit)
+    single = Dynamics(ModelConfig(normalize=True), 4, 2, fit=fit)
     state, buffer, key = ensemble.init(jax.random.key(0)), _buffer(), jax.random.key(5)
     fitted, loss = jax.jit(ensemble.fit)(state, buffer, key)
     losses = []
@@ -137,7 +144,7 @@ def test_vmapped_fit_equals_each_member_fitted_alone():
 
 def test_members_fit_on_their_own_minibatches():
     # Members started equal stay equal only if they saw the same minibatches.
-    dynamics = Dynamics(ModelConfig(ld="ensemble", ensemble=3, updates=10), 4, 2)
+    dynamics = Dynamics(ModelConfig(ld="ensemble", ensemble=3), 4, 2, fit=FitConfig(updates=10))
     state = dynamics.init(jax.random.key(0))
     same = jax.tree.map(lambda p: jnp.broadcast_to(p[:1], p.shape), state.params)
     state = state.replace(params=same)  # Adam states start at zero for every member anyway

@@ -340,9 +340,9 @@ def test_sac_model_runs_mbpos_schedule_and_sac_ldn_the_ld_draw():
     assert model.stop_rule == "mbpo" and model.stop.horizon_max == 15
     assert ldn.stop_rule == "ld" and ldn.imagine.cut == 15 and ldn.iteration_steps == 250
     cheetah = from_preset("branched", env="halfcheetah", algo="sac-model")
-    assert cheetah.stop.horizon_max == 1 and cheetah.model.early_stop
+    assert cheetah.stop.horizon_max == 1 and cheetah.fit.early_stop
     # MBPO's fit to convergence, capped at 500 minibatch steps a fit on these cores
-    assert model.model.early_stop and model.model.updates == 500
+    assert model.fit.early_stop and model.fit.updates == 500
 
 
 # -- a learned termination (imagine.termination "learned") --------------------------------------
@@ -360,12 +360,12 @@ def _hopper_like(key, rows: int):
 def test_a_learned_termination_weighs_both_classes_alike_and_finds_hoppers_test():
     from ldn_jax.buffer import Transitions as Rows
     from ldn_jax.buffer import buffer_add, buffer_init
-    from ldn_jax.config import ModelConfig
+    from ldn_jax.config import FitConfig, ModelConfig
     from ldn_jax.dynamics import Dynamics
     from ldn_jax.envs.mujoco.tasks import TASKS
 
-    config = ModelConfig(hidden=64, updates=300, batch_size=256, lr=3e-3)
-    dynamics = Dynamics(config, 11, 3, termination="learned")
+    fit = FitConfig(updates=300, batch_size=256, lr=3e-3)
+    dynamics = Dynamics(ModelConfig(hidden=64), 11, 3, termination="learned", fit=fit)
     state = dynamics.init(jax.random.key(0))
     # by hand: at log-odds 0 every row costs log 2, weighted 1/2 over its class's share
     rows = Rows(jnp.zeros((4, 11)), jnp.zeros((4, 3)), jnp.zeros((4, 11)), jnp.zeros(4))

@@ -84,7 +84,7 @@ def test_every_sweepable_field_traces_as_a_value(env, algo):
     trainer = Trainer(config)
     states = jax.eval_shape(trainer.init_batch)
     jax.eval_shape(trainer.batched_chunk(), states, trainer.point_values())
-    assert {"agent.actor_lr", "agent.gamma", "model.lr", "agent.entropy_beta"} <= set(sweepable())
+    assert {"agent.actor_lr", "agent.gamma", "fit.lr", "agent.entropy_beta"} <= set(sweepable())
 
 
 def build(*argv: str):
@@ -116,9 +116,9 @@ def test_bad_sweeps_are_one_line(argv, needle):
 
 def test_sweep_flags_and_files_give_the_grid(tmp_path):
     config = build("--sweep", "agent.actor_lr=1e-3,3e-4", "--sweep", "model.lr=0.01,0.001")
-    assert config.sweep == (("agent.actor_lr", (1e-3, 3e-4)), ("model.lr", (0.01, 0.001)))
+    assert config.sweep == (("agent.actor_lr", (1e-3, 3e-4)), ("fit.lr", (0.01, 0.001)))
     assert len(config.points) == 3 * 4  # ldn's three K x the 2 x 2 grid
-    assert config.points[1] == {"k": 0.5, "agent.actor_lr": 1e-3, "model.lr": 0.001}
+    assert config.points[1] == {"k": 0.5, "agent.actor_lr": 1e-3, "fit.lr": 0.001}
     toml = tmp_path / "grid.toml"
     toml.write_text('[sweep]\n"agent.actor_lr" = [1e-3, 3e-4]\n')
     assert build("--config", str(toml)).sweep == (("agent.actor_lr", (1e-3, 3e-4)),)

@@ -13,7 +13,7 @@ as each imagined step (`model.imagined_step` "mean"), the real simulator stepped
 imagined states in the model's place (`model.world` "true": what a perfect model would give;
 "true-reward": its reward and termination only; "true-state": its states and termination
 only), eight times the model's fit steps, the model fitted to the critic's values too
-(`model.value_loss`), imagined rows that train the critic only (`imagine.updates`),
+(`fit.value_loss`), imagined rows that train the critic only (`imagine.updates`),
 branches from the newest real states only (`imagine.start_window`),
 twice the imagined steps per real one, or 5 epochs on imagined rows, which are not rules.
 Per rule and env: IQM [95% interval] of the final moving return, of the training return over

@@ -62,7 +62,7 @@ def analyse(trainer: Trainer, states, scale: common.Scale, key) -> tuple[cal.Sha
     )
     ensemble = {
         "members": scale.ensemble_members,
-        "fit_steps_per_member": rounds * trainer.config.model.updates,
+        "fit_steps_per_member": rounds * trainer.config.fit.updates,
         "final_loss_mean": float(np.mean(losses)),
     }
     return steps, ensemble

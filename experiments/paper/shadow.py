@@ -240,7 +240,7 @@ def fit_ensemble(
     trainer: Trainer, state: TrainState, key: Array, members: int, rounds: int
 ) -> tuple[dict, Array]:
     """E models of M1's architecture from fresh initialisations, each fitted like M1 for
-    `rounds` x `model.updates` minibatch steps on the run's real buffer (its own minibatches).
+    `rounds` x `fit.updates` minibatch steps on the run's real buffer (its own minibatches).
 
     Returns their parameters stacked `[E, ...]` and each member's last mean loss `[E]`.
     M1 saw the buffer grow over training; the members see only its final content.

@@ -15,8 +15,8 @@ Array = jax.Array
 
 def fit(parts: Parts, state: TrainState, real: Episodes, key: Array) -> tuple[TrainState, dict]:
     """The iteration's real steps (`[T, W, ...]`, those of weight > 0) into R, and
-    `model.updates` minibatch steps of M1 on R (`model.early_stop`: MBPO's fit toward
-    convergence, at most `model.updates` steps where that is not 0); the fit's metrics:
+    `fit.updates` minibatch steps of M1 on R (`fit.early_stop`: MBPO's fit toward
+    convergence, at most `fit.updates` steps where that is not 0); the fit's metrics:
     `model_loss` (and `model_epochs` under early_stop)."""
     steps = real.steps
     flat = lambda x: x.reshape((-1, *x.shape[2:]))
@@ -31,10 +31,10 @@ def fit(parts: Parts, state: TrainState, real: Episodes, key: Array) -> tuple[Tr
         batch = batch.replace(terminated=flat(steps.terminated).astype(batch.reward.dtype))
     buffer = buffer_add(state.buffer, batch, flat(steps.weight) > 0)
     value = None
-    if parts.config.model.value_loss:
+    if parts.config.fit.value_loss:
         value = lambda obs: parts.learner.value(state.learner.params, obs)
-    if parts.config.model.early_stop:
-        stop = EarlyStop(max_steps=parts.config.model.updates)
+    if parts.config.fit.early_stop:
+        stop = EarlyStop(max_steps=parts.config.fit.updates)
         model, loss, epochs = parts.dynamics.fit_until_stalled(state.model, buffer, key, stop)
         fitted = {"model_loss": loss, "model_epochs": epochs.astype(loss.dtype)}
     else:

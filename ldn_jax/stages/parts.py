@@ -79,7 +79,8 @@ class Parts:
         )
         dynamics = None
         if config.algorithm.uses_model:
-            dynamics = Dynamics(config.model, real.obs_size, size, config.imagine.termination)
+            termination = config.imagine.termination
+            dynamics = Dynamics(config.model, real.obs_size, size, termination, config.fit)
         return cls(config, real, learner, dynamics, encode, size)
 
 
