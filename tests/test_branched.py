@@ -635,7 +635,7 @@ def test_the_fit_until_stalled_stops_on_the_held_out_error_and_keeps_each_member
     assert elite.mean() < 0.5 * float(np.asarray(first).mean())
     # a cap of steps (`fit.updates` under early_stop) ends it at the first epoch that
     # reaches the cap, before it would have stalled
-    per_epoch = -(-450 // dynamics.config.batch_size)  # 500 rows, one slot in 10 held out
+    per_epoch = -(-450 // dynamics.fitting.batch_size)  # 500 rows, one slot in 10 held out
     _, _, capped = fit(
         state, jax.random.key(2), EarlyStop(max_epochs=400, max_steps=2 * per_epoch + 1)
     )
