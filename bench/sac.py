@@ -136,7 +136,7 @@ def mbpo_fit_costs(seeds: int, env_name: str, rows: int = 20_000) -> dict:
         "what": f"{members} members of {config.model.hidden_layers} x {config.model.hidden} "
         f"{config.model.activation} units at batch {config.fit.batch_size}, vmapped over "
         f"{seeds} seeds; fits every {every} real steps: uncapped, {epochs} epochs each (MBPO's "
-        f"least; runs here took 15-100), and capped at {cap} steps (every fit at its cap)",
+        f"least; runs here took 14-100), and capped at {cap} steps (every fit at its cap)",
         "ms_per_step_all_members": round(1e3 * step_s, 3),
         "fit_steps_100k": round(fit_steps),
         "projected_fit_hours_100k_at_least": round(fit_steps * step_s / 3600, 2),

@@ -819,9 +819,9 @@ ALIASES: dict[str, str] = {
     **{f"model.{name}": f"fit.{name}" for name in _MOVED_FIT},
 }
 """The dotted names of fields that moved when `ModelConfig` and `AgentConfig` were split
-(`model.lr` is `fit.lr` since 2026-12-07)
-(`model.imagine_start` is `imagine.start`): `--set`, `--config`, `--sweep`, `--explain`
-and a run directory's config.json from before still read them."""
+(`model.imagine_start` is `imagine.start`; `model.lr` is `fit.lr` since 2026-12-07):
+`--set`, `--config`, `--sweep`, `--explain` and a run directory's config.json from before
+still read them."""
 
 
 def canonical(name: str) -> str:

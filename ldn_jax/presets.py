@@ -221,7 +221,7 @@ _MBPO = {
     "imagine.cut": 15,
     "imagine.real_share": 0.05,
     "fit.early_stop": True,
-    # MBPO fits to convergence (15 to 100 epochs per fit here, each a pass over R): tens of
+    # MBPO fits to convergence (14 to 100 epochs per fit here, each a pass over R): tens of
     # hours per 100k-step seed on these 2 cores. A fit stops at 500 steps (docs/training.md).
     "fit.updates": 500,
     "model.ensemble": 7,

@@ -61,12 +61,10 @@ def config_of(
     task: str, first_seed: int, seeds: int = SEEDS, steps: int | None = None, arm: str = "plan"
 ) -> Config:
     steps = steps or TASKS[task][0]
-    fields = ARMS[arm]
-    return validate(
-        from_preset(
-            "paper", env=task, algo="sac", seeds=seeds, first_seed=first_seed, steps=steps, **fields
-        )
+    config = from_preset(
+        "paper", env=task, algo="sac", seeds=seeds, first_seed=first_seed, steps=steps, **ARMS[arm]
     )
+    return validate(config)
 
 
 def run_dir(
