@@ -75,6 +75,16 @@ ARMS: dict[str, dict[str, object]] = {
     "obs-reward": {**_OBS, "agent.normalize_reward": True},
     "w16": {**_OBS, "workers": 16},
     "w32": {**_OBS, "workers": 32},
+    "log-std": {**_OBS, "agent.log_std_init": -2.0},
+    "wide": {
+        **_OBS,
+        "agent.hidden_layers": 2,
+        "agent.actor_hidden": 256,
+        "agent.critic_hidden": 256,
+        "agent.activation": "relu",
+        "agent.init": "fan_in",
+        "agent.log_std_init": -2.0,
+    },
 }
 """Arm -> fields over the task's defaults (`--set` names). "sb3" is SB3's A2C under the zoo's
 VecNormalize in our knobs: one env, 5 steps per update, 64 x 64 tanh nets with orthogonal
@@ -82,7 +92,9 @@ init and a state-free log std from 0, PyTorch's RMSProp (decay 0.99, eps 1e-5) a
 a 0.5 clip, observations and rewards standardised, no entropy bonus; "n5-reward" is the same
 on 8 workers; "obs-reward" is "obs-norm" with the rewards standardised too; "w16" and "w32"
 are "obs-norm" on 16 and 32 workers (fewer updates of more rows for the same real steps: what
-an accelerator's default could use, if it learns as well)."""
+an accelerator's default could use, if it learns as well); "log-std" is "obs-norm" with a
+state-free log std from -2 (the zoo's MuJoCo runs), "wide" that on PPO's halfcheetah nets (two
+256-unit ReLU layers, PyTorch's fan-in initialiser)."""
 
 
 def config_of(task: str, arm: str, first_seed: int, steps: int) -> Config:
