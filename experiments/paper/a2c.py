@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from experiments.paper import cache, common
+from ldn_jax import presets
 from ldn_jax.config import Config, from_preset, validate
 from ldn_jax.host import stats
 
@@ -62,6 +63,16 @@ _OPTIMISER = {
 }
 _N5 = {**_OPTIMISER, "agent.n_steps": 5}
 _W1 = {**_N5, "workers": 1}
+_PPO = presets.TASKS["halfcheetah"]["learners"]["ppo"]
+_PPO_NETS = (
+    "agent.hidden_layers",
+    "agent.actor_hidden",
+    "agent.critic_hidden",
+    "agent.activation",
+    "agent.init",
+    "agent.log_std_init",
+)
+"""What "wide" takes of PPO's halfcheetah constants: its nets, not its optimiser."""
 ARMS: dict[str, dict[str, object]] = {
     "default": {},
     "obs-norm": _OBS,
@@ -76,15 +87,7 @@ ARMS: dict[str, dict[str, object]] = {
     "w16": {**_OBS, "workers": 16},
     "w32": {**_OBS, "workers": 32},
     "log-std": {**_OBS, "agent.log_std_init": -2.0},
-    "wide": {
-        **_OBS,
-        "agent.hidden_layers": 2,
-        "agent.actor_hidden": 256,
-        "agent.critic_hidden": 256,
-        "agent.activation": "relu",
-        "agent.init": "fan_in",
-        "agent.log_std_init": -2.0,
-    },
+    "wide": {**_OBS, **{field: _PPO[field] for field in _PPO_NETS}},
 }
 """Arm -> fields over the task's defaults (`--set` names). "sb3" is SB3's A2C under the zoo's
 VecNormalize in our knobs: one env, 5 steps per update, 64 x 64 tanh nets with orthogonal
