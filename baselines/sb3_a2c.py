@@ -11,12 +11,22 @@ defaults, observations and rewards (the discounted return's running std, gamma 0
 clipped at 10), the rewards for training only; its published figures at 1M
 steps: HalfCheetah-v3 3,041 (benchmark.md), Hopper-v3 733. Trains one seed on gymnasium's v5
 task and prints one JSON line as sb3_ppo.py does.
+
+    SB3_PYTHON sb3_a2c.py TASK SEED STEPS CHECKPOINT_DIR
+
+With a fourth argument the run saves its model and VecNormalize statistics there every
+100,000 steps and, started again with the same arguments, goes on from the last save (a 1M-step
+run takes about an hour of one core). A resumed run is not the uninterrupted one to the bit:
+the env restarts an episode, and torch's and the env's random streams start afresh. Its line
+says how many times it resumed.
 """
 
 from __future__ import annotations
 
+import json
 import sys
 import time
+from pathlib import Path
 
 import torch
 from sb3_play import greedy_returns, report
@@ -27,16 +37,36 @@ from stable_baselines3.common.vec_env import VecNormalize
 TASKS = {"halfcheetah": "HalfCheetah-v5", "hopper": "Hopper-v5", "walker2d": "Walker2d-v5"}
 
 
+CHUNK = 100_000
+"""Steps between two saves of a run with a checkpoint directory."""
+
+
 def main() -> None:
     task, seed, steps = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+    folder = Path(sys.argv[4]) if len(sys.argv) > 4 else None
     env_id = TASKS[task]
     torch.set_num_threads(1)
-    env = VecNormalize(make_vec_env(env_id, n_envs=1, seed=seed))
-    model = A2C("MlpPolicy", env, seed=seed, verbose=0)
-    start = time.time()
-    model.learn(steps)
-    seconds = time.time() - start
-    report(task, seed, steps, seconds, greedy_returns(model, env, env_id, {}))
+    seconds, resumes = 0.0, 0
+    if folder is not None and (folder / "progress.json").exists():
+        done = json.loads((folder / "progress.json").read_text())
+        env = VecNormalize.load(str(folder / "normalize.pkl"), make_vec_env(env_id, 1, seed=seed))
+        model = A2C.load(folder / "model.zip", env=env)
+        seconds, resumes = done["train_seconds"], done["resumes"] + 1
+    else:
+        env = VecNormalize(make_vec_env(env_id, n_envs=1, seed=seed))
+        model = A2C("MlpPolicy", env, seed=seed, verbose=0)
+    while model.num_timesteps < steps:
+        start = time.time()
+        chunk = steps - model.num_timesteps if folder is None else CHUNK
+        model.learn(min(chunk, steps - model.num_timesteps), reset_num_timesteps=False)
+        seconds += time.time() - start
+        if folder is not None:
+            folder.mkdir(parents=True, exist_ok=True)
+            model.save(folder / "model.zip")
+            env.save(str(folder / "normalize.pkl"))
+            progress = {"steps": model.num_timesteps, "train_seconds": seconds, "resumes": resumes}
+            (folder / "progress.json").write_text(json.dumps(progress))
+    report(task, seed, steps, seconds, greedy_returns(model, env, env_id, {}), resumes)
 
 
 if __name__ == "__main__":

@@ -28,8 +28,13 @@ def greedy_returns(model, normalize, env_id: str, env_kwargs: dict) -> list[floa
     return returns
 
 
-def report(task: str, seed: int, steps: int, seconds: float, returns: list[float]) -> None:
-    """The run's one JSON line: task, seed, steps, training seconds, greedy returns, mean."""
+def report(
+    task: str, seed: int, steps: int, seconds: float, returns: list[float], resumes: int = 0
+) -> None:
+    """The run's one JSON line: task, seed, steps, training seconds, greedy returns, mean, and
+    how many times a run resumed from its checkpoint (only where it did)."""
     line = {"task": task, "seed": seed, "steps": steps, "train_seconds": round(seconds)}
     line |= {"returns": [round(r, 1) for r in returns], "mean": round(float(np.mean(returns)), 1)}
+    if resumes:
+        line["resumes"] = resumes
     print(json.dumps(line))
