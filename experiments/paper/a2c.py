@@ -156,7 +156,7 @@ SB3_RUNS = "sb3_a2c.jsonl"
 """SB3's A2C under the zoo's settings, one JSON line per task and seed as
 `baselines/sb3_a2c.py TASK SEED STEPS` prints it (with the SB3 version and the load beside it
 added when kept), in `a2c/`."""
-DEFAULT_ARMS = {"halfcheetah": "obs-norm", "hopper": "obs-reward"}
+DEFAULT_ARMS = {"halfcheetah": "obs-norm", "hopper": "obs-reward", "walker2d": "obs-norm"}
 """Each task's arm that is its A2C-family default today (seeds 0-4 chose it)."""
 
 
