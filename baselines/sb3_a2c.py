@@ -51,7 +51,7 @@ def main() -> None:
         done = json.loads((folder / "progress.json").read_text())
         env = VecNormalize.load(str(folder / "normalize.pkl"), make_vec_env(env_id, 1, seed=seed))
         model = A2C.load(folder / "model.zip", env=env)
-        seconds, resumes = done["train_seconds"], done["resumes"] + 1
+        seconds, resumes = done["train_seconds"], done["resumes"] + 1  # saved chunks only
     else:
         env = VecNormalize(make_vec_env(env_id, n_envs=1, seed=seed))
         model = A2C("MlpPolicy", env, seed=seed, verbose=0)
