@@ -57,7 +57,7 @@ def main() -> None:
         model = A2C("MlpPolicy", env, seed=seed, verbose=0)
     while model.num_timesteps < steps:
         start = time.time()
-        chunk = steps - model.num_timesteps if folder is None else CHUNK
+        chunk = steps if folder is None else CHUNK
         model.learn(min(chunk, steps - model.num_timesteps), reset_num_timesteps=False)
         seconds += time.time() - start
         if folder is not None:
