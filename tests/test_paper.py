@@ -373,6 +373,21 @@ def test_the_plan_says_where_each_mujoco_run_stands_without_training(
     assert states["ppo-model"] == states["ppo-model"] | {"state": "partial", "steps": fewest}
     assert states["ppo-ldn"]["state"] == "new"
     assert plan.summary(table).startswith("4 of 6 runs finished (1 from records)")
+    # a table's `--report` (collect_runs without training): the unfinished runs are pending,
+    # with how far each got, and nothing is trained (ensure_run fails above)
+    entries = cache.collect_runs(
+        ("inverted_pendulum",), ("ppo-model", "ppo-ldn"), scale, tmp_path, train=False
+    )
+    assert [(e["status"], e["reason"]) for e in entries] == [
+        ("pending", f"training at {fewest:,} real steps per seed"),
+        ("pending", "not trained at the current defaults"),
+    ]
+    rows = [*entries, {**entries[1], "env": "ant"}]
+    note = report.report_mujoco._pending_note({"rows": rows})
+    assert note == [
+        f"Pending at this scale (training at {fewest:,} real steps per seed): inverted_pendulum.",
+        "Pending at this scale (not trained at the current defaults): inverted_pendulum, ant.",
+    ]
     # --train: the unfinished runs, in order, and nothing else
     trained = []
     monkeypatch.setattr(cache, "ensure_run", lambda config, out: trained.append(out.name))
@@ -812,6 +827,15 @@ def test_table_4s_verdicts_read_the_p_holm_adjusted_over_the_six_tasks():
     # U = 10 of 25 pairs (each A3C seed 1 above its MBRL-LDN twin): exact two-sided p 0.69
     assert "Mann-Whitney p = 0.69 (descriptive, outside the corrected family)" in beside
     assert "P(better) = 0.40" in beside
+    assert "imagined" not in beside  # no share recorded: nothing said
+    # An MBRL-LDN run that imagined under 5% of its real steps is called what it is.
+    idle = [rows[0], {**rows[1], "imagined_share": 0.004}]
+    said = table4_section({"seeds": 5, "rows": idle}).findings[0]
+    assert said.endswith(
+        "MBRL-LDN imagined 0.4% of its real steps: an A3C run with a model beside it."
+    )
+    busy = [rows[0], {**rows[1], "imagined_share": 0.3}]
+    assert "imagined" not in table4_section({"seeds": 5, "rows": busy}).findings[0]
 
 
 def test_figure_9s_verdicts_read_the_p_holm_adjusted_over_the_figure():

@@ -239,11 +239,17 @@ def _resolved(config: dict) -> dict:
 
 
 def collect_runs(
-    envs: tuple[str, ...], algos: tuple[str, ...], scale: Scale, results: Path, k=(1.0,)
+    envs: tuple[str, ...],
+    algos: tuple[str, ...],
+    scale: Scale,
+    results: Path,
+    k=(1.0,),
+    train: bool = True,
 ) -> list[dict]:
     """Ensure the run of every env x algo; one entry each, in order: `{env, algo, status:
     "done", dir, config, summary}`, or `{env, algo, status: "pending", reason}` for a run this
-    scale does not do (`run_config`)."""
+    scale does not do (`run_config`). `train=False` trains nothing: a run that is not
+    finished (nor recorded) is pending, with how far it got."""
     entries = []
     for env in envs:
         for algo in algos:
@@ -255,6 +261,10 @@ def collect_runs(
                 )
                 continue
             out = run_dir(results, scale, config)
+            if not train and (unfinished := _unfinished(config, out)):
+                pending = {"status": "pending", "reason": unfinished}
+                entries.append({"env": env, "algo": algo, **pending})
+                continue
             summary = ensure_run(config, out)
             entries.append(
                 {
@@ -267,6 +277,16 @@ def collect_runs(
                 }
             )
     return entries
+
+
+def _unfinished(config: Config, out: Path) -> str | None:
+    """Why the run of `config` in `out` is not there to read (None where it is)."""
+    state = progress(config, out)
+    if state["state"] in ("done", "record"):
+        return None
+    if state["state"] == "partial":
+        return f"training at {state['steps']:,} real steps per seed"
+    return "not trained at the current defaults"
 
 
 def load_history(out: Path) -> dict[str, np.ndarray]:

@@ -28,9 +28,19 @@ def _pending_note(table: dict) -> list[str]:
     pending = [r for r in table["rows"] if r["status"] != "done"]
     if not pending:
         return []
-    names = sorted({r["env"] for r in pending}, key=[r["env"] for r in pending].index)
-    reason = pending[0]["reason"].removeprefix(f"{pending[0]['env']} ")
-    return [f"Pending at this scale ({reason}): {', '.join(names)}."]
+    by_reason: dict[str, list[str]] = {}
+    for r in pending:
+        names = by_reason.setdefault(r["reason"].removeprefix(f"{r['env']} "), [])
+        names += [] if r["env"] in names else [r["env"]]
+    return [
+        f"Pending at this scale ({reason}): {', '.join(names)}."
+        for reason, names in by_reason.items()
+    ]
+
+
+IDLE_SHARE = 0.05
+"""A model-based run that imagined fewer steps than this share of its real ones is called
+out as what it is: the model-free learner with a model beside it."""
 
 
 def table4_section(table: dict) -> Section:
@@ -110,11 +120,18 @@ def table4_findings(rows: list[dict], plain: dict[str, list[float]] | None = Non
                 f"{a3c_mean:.1f}: MBRL-LDN against it {mann_whitney(x, plain[env])} "
                 f"(descriptive, outside the corrected family), {better(x, plain[env], False)}."
             )
+        share = ldn.get("imagined_share")
+        idle = (
+            f" MBRL-LDN imagined {share:.1%} of its real steps: an A3C run with a model beside "
+            "it."
+            if share is not None and share < IDLE_SHARE
+            else ""
+        )
         findings.append(
             f"Table 4, {env} ({budget(ldn)}): MBRL-LDN {ldn['mean']:.1f} vs "
             f"A3C-Model {model['mean']:.1f} final moving return "
             f"({adjusted_text(raw[env], p, family)}, {better(x, y, False)}; paper "
-            f"{ldn['paper']} vs {model['paper']}): {verdict}.{a3c}"
+            f"{ldn['paper']} vs {model['paper']}): {verdict}.{a3c}{idle}"
         )
     return findings
 

@@ -1,11 +1,13 @@
 """Table 4: total moving reward on six MuJoCo tasks, A2C-Model vs MBRL-LDN.
 
     python -m experiments.paper.table4 [--scale cpu|cpu-full|paper] [--smoke] [--results DIR]
+        [--report]
 
 "Total moving reward" is read as the final moving return (the paper's numbers exceed what
 some tasks can score in 1,000 steps, so compare the two algorithms, not the values). Both
 scales run all six tasks: the CPU scale at short budgets (`common.MUJOCO_CPU_BUDGETS`),
-`--scale paper` at 4,000 episodes. Writes table4.json, table4.csv and
+`--scale paper` at 4,000 episodes. `--report` trains nothing: a run that is not finished
+(another process may be training it) is a pending row. Writes table4.json, table4.csv and
 table4.png (learning curves per task) into DIR/table4/.
 """
 
@@ -30,6 +32,8 @@ def rows(entries: list[dict]) -> list[dict]:
             final = [r["final_moving_return"] for r in runs]
             row.update(common.describe(final))
             row.update(final_moving_returns=final, **cache.run_fields(entry))
+            summary = entry["summary"]
+            row["imagined_share"] = summary.get("imagined_steps", 0) / summary["env_steps"]
         else:
             row["reason"] = entry["reason"]
         out.append(row)
@@ -58,8 +62,10 @@ def plain_a3c(results, entries: list[dict]) -> dict[str, list[float]]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    scale, results = common.parse_args(argv, __doc__)
-    entries = cache.collect_runs(ENVS, ALGOS, scale, results)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    report = "--report" in argv
+    scale, results = common.parse_args([a for a in argv if a != "--report"], __doc__)
+    entries = cache.collect_runs(ENVS, ALGOS, scale, results, train=not report)
     table = rows(entries)
     out = common.out_dir(results, "table4")
     record = {
