@@ -265,6 +265,11 @@ class SACConfig:
     """The entropy the temperature steers toward; None: minus the action dimension."""
     init_alpha: float = 1.0
     """The temperature at the start."""
+    critic_first: bool = False
+    """True: each update steps the critics first and then the actor and the temperature, the
+    actor against the critics after that step (SB3's, SBX's and CleanRL's order). False: one
+    gradient of the three summed losses, the actor against the critics before the step (the
+    three train ops of one step, as softlearning, MBPO's SAC, runs them)."""
     model_retain: int = 4
     """sac-model, sac-ldn: the model memory keeps the imagined rows of this many iterations'
     branches (a ring of that many times the most one iteration imagines), MBPO's retention

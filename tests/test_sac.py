@@ -66,6 +66,43 @@ def test_polyak_moves_the_target_by_tau():
     np.testing.assert_allclose(np.asarray(moved["w"]), [1.5, 1.5])
 
 
+def test_critic_first_steps_the_actor_against_the_critics_after_their_step():
+    """`sac.critic_first` (SB3's order): the critics take the same step as in the joint
+    update, and the actor's first Adam step, -lr g / (|g| + eps), follows the gradient of its
+    loss read at the critics after that step, not before."""
+    key, batch = jax.random.key(3), _random_batch(jax.random.key(4), 32, 3, 2)
+    joint = SAC(SACConfig(hidden=8), obs_size=3, actions=2)
+    first = SAC(SACConfig(hidden=8, critic_first=True), obs_size=3, actions=2)
+    state = joint.init(jax.random.key(0))
+    after_joint, _ = jax.jit(joint.update)(state, batch, key)
+    after_first, _ = jax.jit(first.update)(state, batch, key)
+    close = lambda a, b: jax.tree.map(
+        lambda x, y: np.testing.assert_allclose(x, y, rtol=1e-5, atol=1e-7), a, b
+    )
+    close(after_first.params["critic"], after_joint.params["critic"])
+    lr, eps = first.config.lr, 1e-8
+    for critics, after in ((after_joint.params["critic"], after_first), (None, after_joint)):
+        grads = jax.grad(joint.losses, has_aux=True)(state.params, batch, key, critics)[0]
+        expected = jax.tree.map(
+            lambda p, g: p - lr * g / (jnp.abs(g) + eps), state.params["actor"], grads["actor"]
+        )
+        close(after.params["actor"], expected)
+    moved = jax.tree.map(lambda a, b: float(jnp.abs(a - b).max()), after_first.params["actor"],
+                         after_joint.params["actor"])  # fmt: skip
+    assert max(jax.tree.leaves(moved)) > 0
+
+
+def _random_batch(key, rows: int, obs: int, actions: int) -> Transitions:
+    k = jax.random.split(key, 4)
+    return Transitions(
+        obs=jax.random.normal(k[0], (rows, obs)),
+        action=jax.random.uniform(k[1], (rows, actions), minval=-1, maxval=1),
+        reward=jax.random.normal(k[2], (rows,)),
+        next_obs=jax.random.normal(k[3], (rows, obs)),
+        terminated=jnp.zeros(rows),
+    )
+
+
 def test_sac_solves_a_one_step_bandit():
     """Reward -(a - 0.5)^2, every step terminal: the greedy action must go to 0.5, and the
     targets must follow the critics."""

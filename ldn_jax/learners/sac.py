@@ -153,9 +153,12 @@ class SAC:
         """tanh of the Gaussian's mean."""
         return jnp.tanh(self.actor.apply(params["actor"], obs)[0])
 
-    def losses(self, params: dict, batch: Transitions, key: Array) -> tuple[Array, dict]:
+    def losses(
+        self, params: dict, batch: Transitions, key: Array, critics: dict | None = None
+    ) -> tuple[Array, dict]:
         """The three losses of one batch, summed for one gradient (each reads only its own
-        parameters: the others enter through `stop_gradient`)."""
+        parameters: the others enter through `stop_gradient`). The actor's loss reads
+        `critics` where given (the critics after this update's step), else `params`'."""
         k_next, k_now = jax.random.split(key)
         alpha = jnp.exp(jax.lax.stop_gradient(params["log_alpha"]))
         next_action, next_log_prob = squashed_sample(
@@ -165,7 +168,7 @@ class SAC:
         q = self.q(params["critic"], batch.obs, batch.action)
         critic = critic_loss(q, batch, next_q, next_log_prob, alpha, self.gamma)
         action, log_prob = squashed_sample(*self.actor.apply(params["actor"], batch.obs), k_now)
-        frozen = jax.lax.stop_gradient(params["critic"])
+        frozen = jax.lax.stop_gradient(params["critic"] if critics is None else critics)
         actor = actor_loss(alpha, log_prob, self.q(frozen, batch.obs, action))
         temperature = temperature_loss(params["log_alpha"], log_prob, self.target_entropy)
         metrics = {"critic_loss": critic, "actor_loss": actor, "alpha": alpha}
@@ -173,12 +176,30 @@ class SAC:
         return critic + actor + temperature, metrics
 
     def update(self, state: SACState, batch: Transitions, key: Array) -> tuple[SACState, dict]:
-        """One gradient step of critics, actor and temperature, then the targets' Polyak step."""
-        grads, metrics = jax.grad(self.losses, has_aux=True)(state.params, batch, key)
+        """One gradient step of critics, actor and temperature, then the targets' Polyak step
+        (`critic_first`: the actor's gradient read at the critics after their step)."""
+        if self.config.critic_first:
+            grads, metrics = self._critic_first_grads(state, batch, key)
+        else:
+            grads, metrics = jax.grad(self.losses, has_aux=True)(state.params, batch, key)
         updates, opt_state = self.optimizer.update(grads, state.opt_state, state.params)
         params = optax.apply_updates(state.params, updates)
         params["target"] = polyak(params["target"], params["critic"], self.config.tau)
         return SACState(params, opt_state), metrics
+
+    def _critic_first_grads(
+        self, state: SACState, batch: Transitions, key: Array
+    ) -> tuple[dict, dict]:
+        """The gradients of `losses` with the actor's read at the critics after this update's
+        step. Adam moves each parameter from its own gradient and moments (and the shared
+        step count), so the critics' step taken alone is the one the update then applies:
+        it is taken once here (the other gradients zero) to read the actor's loss at it."""
+        grad = jax.grad(self.losses, has_aux=True)
+        critic = grad(state.params, batch, key)[0]["critic"]
+        alone = jax.tree.map(jnp.zeros_like, state.params) | {"critic": critic}
+        stepped, _ = self.optimizer.update(alone, state.opt_state, state.params)
+        critics = optax.apply_updates(state.params["critic"], stepped["critic"])
+        return grad(state.params, batch, key, critics)
 
     def learn(
         self,
