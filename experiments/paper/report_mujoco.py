@@ -122,8 +122,7 @@ def table4_findings(rows: list[dict], plain: dict[str, list[float]] | None = Non
             )
         share = ldn.get("imagined_share")
         idle = (
-            f" MBRL-LDN imagined {share:.1%} of its real steps: an A3C run with a model beside "
-            "it."
+            f" MBRL-LDN imagined {share:.1%} of its real steps: an A3C run with a model beside it."
             if share is not None and share < IDLE_SHARE
             else ""
         )
