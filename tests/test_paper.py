@@ -382,6 +382,10 @@ def test_the_plan_says_where_each_mujoco_run_stands_without_training(
         ("pending", f"training at {fewest:,} real steps per seed"),
         ("pending", "not trained at the current defaults"),
     ]
+    gone = cache.collect_runs(
+        ("inverted_pendulum",), ("ppo-ldn",), scale, tmp_path / "x", train=False
+    )
+    assert gone[0]["reason"] == "not trained here"  # no run and no record of any config
     rows = [*entries, {**entries[1], "env": "ant"}]
     note = report.report_mujoco._pending_note({"rows": rows})
     assert note == [

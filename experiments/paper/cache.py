@@ -286,7 +286,9 @@ def _unfinished(config: Config, out: Path) -> str | None:
         return None
     if state["state"] == "partial":
         return f"training at {state['steps']:,} real steps per seed"
-    return "not trained at the current defaults"
+    if RunDir(out).holds_run() or _recorded(out) is not None:
+        return "not trained at the current defaults"  # a run or record of another config
+    return "not trained here"
 
 
 def load_history(out: Path) -> dict[str, np.ndarray]:

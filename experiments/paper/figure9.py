@@ -5,7 +5,10 @@ config, trained once), and K = 0.5 and 2 are one vmapped run of their own. Seed 
 key s at every K, so the three K share their initialisations as in one vmapped run.
 
     python -m experiments.paper.figure9 [--scale cpu|cpu-full|paper] [--smoke] [--results DIR]
+        [--report]
 
+`--report` trains nothing: an env with a run that is not finished is pending, saying how far
+that run got.
 Writes figure9.json, figure9.csv and figure9.png (per env: learning curves per K, and episodes
 to threshold per K, or the final moving return where the env has no threshold) into
 DIR/figure9/.
@@ -104,10 +107,14 @@ def figure(envs: list[list[dict]], panels: list[dict], path: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    scale, results = common.parse_args(argv, __doc__)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    train = "--report" not in argv
+    scale, results = common.parse_args([a for a in argv if a != "--report"], __doc__)
     done, pending = [], []
     for env in (scale.ld_env, *scale.ablation_envs):
-        entries = [cache.collect_runs((env,), ("ldn",), scale, results, k=k)[0] for k in PARTS]
+        entries = [
+            cache.collect_runs((env,), ("ldn",), scale, results, k=k, train=train)[0] for k in PARTS
+        ]
         stopped = [e for e in entries if e["status"] != "done"]
         if stopped:
             pending.append({"env": env, "reason": stopped[0]["reason"]})
