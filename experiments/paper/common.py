@@ -170,6 +170,13 @@ def parse_args(argv: list[str] | None, description: str) -> tuple[Scale, Path]:
     return SCALES["smoke" if args.smoke else args.scale], args.results
 
 
+def take_flag(argv: list[str] | None, flag: str) -> tuple[bool, list[str]]:
+    """Whether `flag` is among a script's arguments (the command line's where `argv` is None),
+    and the arguments without it, for `parse_args`."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    return flag in argv, [a for a in argv if a != flag]
+
+
 def script(main: Callable[[list[str] | None], int]) -> int:
     """A script's exit status from the command line: a run that another process is training
     (`plan --train`, a study) stops the script with one line, as `ldn-jax --resume` does."""

@@ -107,14 +107,13 @@ def figure(envs: list[list[dict]], panels: list[dict], path: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else list(argv)
-    train = "--report" not in argv
-    scale, results = common.parse_args([a for a in argv if a != "--report"], __doc__)
+    report, argv = common.take_flag(argv, "--report")
+    scale, results = common.parse_args(argv, __doc__)
     done, pending = [], []
     for env in (scale.ld_env, *scale.ablation_envs):
-        entries = [
-            cache.collect_runs((env,), ("ldn",), scale, results, k=k, train=train)[0] for k in PARTS
-        ]
+        entries = []
+        for k in PARTS:
+            entries += cache.collect_runs((env,), ("ldn",), scale, results, k, not report)
         stopped = [e for e in entries if e["status"] != "done"]
         if stopped:
             pending.append({"env": env, "reason": stopped[0]["reason"]})

@@ -83,9 +83,8 @@ def train(scale: common.Scale, results) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else list(argv)
-    training = "--train" in argv
-    scale, results = common.parse_args([a for a in argv if a != "--train"], __doc__)
+    training, argv = common.take_flag(argv, "--train")
+    scale, results = common.parse_args(argv, __doc__)
     if training:
         train(scale, results)
     table = rows(scale, results)

@@ -62,9 +62,8 @@ def plain_a3c(results, entries: list[dict]) -> dict[str, list[float]]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else list(argv)
-    report = "--report" in argv
-    scale, results = common.parse_args([a for a in argv if a != "--report"], __doc__)
+    report, argv = common.take_flag(argv, "--report")
+    scale, results = common.parse_args(argv, __doc__)
     entries = cache.collect_runs(ENVS, ALGOS, scale, results, train=not report)
     table = rows(entries)
     out = common.out_dir(results, "table4")
