@@ -495,6 +495,61 @@ def test_the_study_pools_one_seed_runs_by_task_budget_and_label(tmp_path):
     )
 
 
+def test_the_warmup_plan_selects_on_seeds_0_4_and_confirms_on_fresh_seeds(tmp_path):
+    import json
+
+    from experiments.paper import sac as study
+
+    arms = tmp_path / "sac" / "arms"
+    arms.mkdir(parents=True)
+
+    def run(task, seed, score, arm="plan"):
+        data = {"task": task, "seeds": [seed], "steps": 200_000, "commits": ["abc1234"]}
+        data |= {"env_steps_per_second": 30.0, "gymnasium": [[score]]}
+        name = "sac" if arm == "plan" else f"sac-{arm}"
+        data |= {} if arm == "plan" else {"arm": arm}
+        (arms / f"{task}-{name}-s{seed}+1-200000.json").write_text(json.dumps(data))
+
+    plan = [4000.0, 4500.0, 4700.0, 5000.0, 5300.0]
+    for seed, score in enumerate(plan, start=5):
+        run("halfcheetah", seed, score)
+    for seed, score in enumerate([6600.0, 8000.0, 7000.0, 3000.0]):
+        run("halfcheetah", seed, score, arm="warmup")
+    rows = study.pooled(tmp_path)
+    assert study.warmup_decision(rows)["verdict"] == "pending"  # four of five seeds
+    run("halfcheetah", 4, 4200.0, arm="warmup")
+    decision = study.warmup_decision(study.pooled(tmp_path))
+    # 3 of 5 warm-up seeds above every plan seed, one below all, one between: U = 16 of 25
+    assert decision["improvement"]["probability"] == pytest.approx(16 / 25)
+    assert decision["verdict"] == "adopt"  # a higher IQM and P 0.64 > 0.6
+    run("halfcheetah", 4, 3500.0, arm="warmup")  # U = 15 of 25: P 0.6 is not above the bar
+    assert study.warmup_decision(study.pooled(tmp_path))["verdict"] == "keep"
+    assert study.warmup_tests(study.pooled(tmp_path)) is None
+    # the fresh warm-up seeds are a confirmatory row of their own, apart from the plan's
+    for seed in range(15, 20):
+        run("halfcheetah", seed, 7000.0 + seed, arm="warmup")
+        run("hopper", seed, 2000.0 + seed, arm="warmup")
+    rows = study.pooled(tmp_path)
+    fresh = [r for r in rows if r["label"] == "confirmatory"]
+    assert sorted((r["task"], r["arm"], r["seeds"][0]) for r in fresh) == [
+        ("halfcheetah", "plan", 5), ("halfcheetah", "warmup", 15), ("hopper", "warmup", 15)
+    ]  # fmt: skip
+    assert study.warmup_tests(rows) is None  # hopper's plan seeds are missing
+    for seed, score in enumerate([1900.0, 2030.0, 1500.0, 2500.0, 1800.0], start=5):
+        run("hopper", seed, score)
+    tests = study.warmup_tests(study.pooled(tmp_path))
+    by_task = {t["task"]: t for t in tests}
+    # halfcheetah: every warm-up seed above every plan seed, p = 1 / C(10, 5); hopper: 3 of
+    # 5 plan seeds below all five, 2 of 5 not
+    assert by_task["halfcheetah"]["p"] == pytest.approx(1 / 252)
+    assert by_task["hopper"]["p"] > 0.05 and not by_task["hopper"]["shown"]
+    assert by_task["halfcheetah"]["holm_p"] == pytest.approx(2 / 252)
+    assert by_task["halfcheetah"]["shown"]
+    study.report(tmp_path)
+    text = (tmp_path / "sac" / "sac.md").read_text()
+    assert "**keep**" in text and "| halfcheetah | `warmup` > `plan` |" in text
+
+
 def test_the_rule_study_tests_once_every_seed_is_in_and_corrects_by_holm(tmp_path):
     import json
 

@@ -4,6 +4,7 @@ steps, halfcheetah and hopper at 200,000, seeds 5-9 (confirmatory) and 0-4 (expl
 
     python -m experiments.paper.sac [--tasks TASK,...] [--first-seed S] [--per-run N]
         [--arm plan|warmup] [--report]
+    python -m experiments.paper.sac --tasks halfcheetah,hopper --arm warmup --first-seed 15
     python -m experiments.paper.sac --side-by-side
 
 Trains every run (a vmapped program of `--per-run` seeds, one by default, so that each seed's
@@ -12,7 +13,9 @@ not outlive the machine it trained on; resumed when interrupted, reused when fin
 records under `records/sac/`), then replays each seed's greedy policy in gymnasium (10
 episodes, `ldn-jax eval`'s) into `sac/arms/TASK-sac-sS+N-STEPS.json` (committed, with the
 commits that trained it); `--report` rebuilds `sac/sac.json` and `sac/sac.md` from them, the
-runs of one task, budget and label pooled into one row.
+runs of one task, budget, arm and label pooled into one row. The report also reads the
+warm-up plan (`experiments/plans/sac-warmup.md`): its selection on the `warmup` arm's seeds 0-4
+and, once adopted, its confirmation on that arm's fresh seeds 15-19 (the second command).
 
 `--side-by-side` trains (or reuses) ours where SB3's SAC ran on these cores
 (`baselines/sb3_sac.py`, its JSON lines kept in `sac/sb3_sac.jsonl`): halfcheetah, seed 0,
@@ -42,7 +45,16 @@ PER_RUN = {"inverted_pendulum": 5, "halfcheetah": 1, "hopper": 1}
 seed's 200k steps take most of an hour on 2 cores, and each lands on its own."""
 CONFIRMATORY = 5
 """The plan's fresh seeds start here; 0-4 are exploratory."""
+FRESH = {"plan": CONFIRMATORY, "warmup": 15}
+"""Arm -> the seed its confirmatory runs start from (`experiments/plans/sac.md`,
+`experiments/plans/sac-warmup.md`); below it, and on an arm not named, a run is exploratory."""
 EPISODES = 10
+WARMUP_RULE = ("halfcheetah", 200_000, 0.6)
+"""The warm-up plan's selection: task, budget, and the P(improvement) of the `warmup` arm's
+seeds 0-4 over the plan's confirmatory seeds that it must exceed (its IQM must exceed theirs)."""
+WARMUP_TASKS = ("halfcheetah", "hopper")
+"""The warm-up plan's confirmation: `warmup` on its fresh seeds against the plan's, one-sided
+Mann-Whitney on each task, Holm over the two."""
 
 
 ARMS: dict[str, dict[str, object]] = {
@@ -137,13 +149,12 @@ def side_lines(results: Path) -> list[str]:
 
 
 def pooled(results: Path) -> list[dict]:
-    """The replayed runs of `sac/arms/`, pooled by task, budget, arm and label (seeds 0-4
-    and every arm but the plan's exploratory, the plan's from `CONFIRMATORY` on
-    confirmatory), in seed order."""
+    """The replayed runs of `sac/arms/`, pooled by task, budget, arm and label (an arm's runs
+    from its `FRESH` seed on confirmatory, the rest exploratory), in seed order."""
     groups: dict[tuple, list[dict]] = {}
     for data in cache.replayed(results / "sac" / "arms"):
         arm = data.get("arm", "plan")
-        fresh = data["seeds"][0] >= CONFIRMATORY and arm == "plan"
+        fresh = arm in FRESH and data["seeds"][0] >= FRESH[arm]
         label = "confirmatory" if fresh else "exploratory"
         groups.setdefault((data["task"], data["steps"], arm, label), []).append(data)
     rows = []
@@ -175,6 +186,80 @@ def pooled(results: Path) -> list[dict]:
     return rows
 
 
+def _row(rows: list[dict], task: str, steps: int, arm: str, label: str) -> dict | None:
+    found = [
+        r
+        for r in rows
+        if (r["task"], r["steps"], r["arm"], r["label"]) == (task, steps, arm, label)
+    ]
+    return found[0] if found else None
+
+
+def warmup_decision(rows: list[dict]) -> dict:
+    """The warm-up plan's selection rule, read once both sides have their 5 seeds: "adopt"
+    where the `warmup` arm's exploratory seeds beat the plan's confirmatory ones on IQM and
+    P(improvement) is above the bar, "keep" otherwise, "pending" until then."""
+    task, steps, bar = WARMUP_RULE
+    warm = _row(rows, task, steps, "warmup", "exploratory")
+    plan = _row(rows, task, steps, "plan", "confirmatory")
+    if not (warm and plan and warm["complete"] and plan["complete"]):
+        return {"verdict": "pending", "task": task, "steps": steps}
+    better = stats.improvement(warm["scores"], plan["scores"])
+    adopt = warm["score"]["iqm"] > plan["score"]["iqm"] and better["probability"] > bar
+    return {
+        "verdict": "adopt" if adopt else "keep",
+        "task": task,
+        "steps": steps,
+        "warmup": {"seeds": warm["seeds"], "score": warm["score"]},
+        "plan": {"seeds": plan["seeds"], "score": plan["score"]},
+        "improvement": better,
+        "bar": bar,
+    }
+
+
+def warmup_tests(rows: list[dict]) -> list[dict] | None:
+    """The warm-up plan's confirmation: `warmup` on its fresh seeds > the plan's fresh seeds
+    at 200k on each of `WARMUP_TASKS`, Holm over them; None until every row is complete."""
+    scores = {}
+    for task in WARMUP_TASKS:
+        for arm in ("warmup", "plan"):
+            row = _row(rows, task, TASKS[task][0], arm, "confirmatory")
+            if row is None or not row["complete"]:
+                return None
+            scores[task, arm] = row["scores"]
+    return stats.planned_tests(scores, WARMUP_TASKS, [("warmup", "plan")], group="task")
+
+
+def warmup_lines(rows: list[dict]) -> list[str]:
+    decision = warmup_decision(rows)
+    lines = ["", "### The warm-up plan (`experiments/plans/sac-warmup.md`)", ""]
+    if decision["verdict"] == "pending":
+        lines.append(
+            f"Selection pending: it reads {decision['task']} at {decision['steps']:,} steps once "
+            "the `warmup` arm's seeds 0-4 and the plan's confirmatory seeds are all in."
+        )
+    else:
+        warm, plan = decision["warmup"], decision["plan"]
+        lines.append(
+            f"Selection ({decision['task']}, {decision['steps']:,} steps): `warmup` seeds "
+            f"{_seeds(warm['seeds'])} {stats.text(warm['score'])} against the plan's seeds "
+            f"{_seeds(plan['seeds'])} {stats.text(plan['score'])}, P(improvement) "
+            f"{stats.improvement_text(decision['improvement'])} (the rule: a higher IQM and "
+            f"P above {decision['bar']}): **{decision['verdict']}**."
+        )
+    tests = warmup_tests(rows)
+    lines.append("")
+    if tests is None:
+        lines.append(
+            "Confirmation: waits for the `warmup` arm's seeds "
+            f"{FRESH['warmup']}-{FRESH['warmup'] + SEEDS - 1} on "
+            f"{' and '.join(WARMUP_TASKS)} (run only if adopted)."
+        )
+    else:
+        lines += ["", *stats.tests_table(tests, "task", "P(improvement)", ("shown", "not shown"))]
+    return lines
+
+
 def runs_of(results: Path, row: dict) -> list[Path]:
     """The run directories behind a `pooled` row, one per run (each reads as its record
     where the directory is gone)."""
@@ -195,7 +280,10 @@ def _seeds(seeds: list[int]) -> str:
 def report(results: Path) -> None:
     rows = pooled(results)
     out = common.out_dir(results, "sac")
-    common.write_json(out / "sac.json", {"rows": rows})
+    common.write_json(
+        out / "sac.json",
+        {"rows": rows, "warmup": warmup_decision(rows), "warmup_tests": warmup_tests(rows)},
+    )
     lines = [
         "## `sac` (plan: `experiments/plans/sac.md`)",
         "",
@@ -230,6 +318,7 @@ def report(results: Path) -> None:
             "",
             "Training curves (each seed's episode returns, smoothed): ![sac](sac/sac.png)",
         ]
+    lines += warmup_lines(rows)
     lines += side_lines(results)
     (out / "sac.md").write_text("\n".join(lines) + "\n")
     print(f"wrote {out}/sac.json and sac.md")
