@@ -185,7 +185,8 @@ def test_a_sweep_resumes_to_the_bit(sweep_run, tmp_path):
 @SLOW  # 25 s; the default suite keeps the device tests of tests/test_scale.py
 def test_a_sweep_over_two_devices_gives_the_one_device_run(sweep_run, tmp_path):
     ref_dir, _ = sweep_run
-    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2")
+    flags = f"{os.environ.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count=2"
+    env = dict(os.environ, XLA_FLAGS=flags.strip())
     args = ["--config", str(ref_dir / "config.json"), "--devices", "2", "--quiet"]
     args += ["--compile-cache", "none", "--out", str(tmp_path)]
     result = subprocess.run(
