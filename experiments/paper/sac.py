@@ -230,8 +230,8 @@ def warmup_tests(rows: list[dict]) -> list[dict] | None:
     return stats.planned_tests(scores, WARMUP_TASKS, [("warmup", "plan")], group="task")
 
 
-def warmup_lines(rows: list[dict]) -> list[str]:
-    decision = warmup_decision(rows)
+def warmup_lines(decision: dict, tests: list[dict] | None) -> list[str]:
+    """`warmup_decision`'s and `warmup_tests`' results as the report's section."""
     lines = ["", "### The warm-up plan (`experiments/plans/sac-warmup.md`)", ""]
     if decision["verdict"] == "pending":
         lines.append(
@@ -247,7 +247,6 @@ def warmup_lines(rows: list[dict]) -> list[str]:
             f"{stats.improvement_text(decision['improvement'])} (the rule: a higher IQM and "
             f"P above {decision['bar']}): **{decision['verdict']}**."
         )
-    tests = warmup_tests(rows)
     lines.append("")
     if tests is None:
         lines.append(
@@ -280,10 +279,8 @@ def _seeds(seeds: list[int]) -> str:
 def report(results: Path) -> None:
     rows = pooled(results)
     out = common.out_dir(results, "sac")
-    common.write_json(
-        out / "sac.json",
-        {"rows": rows, "warmup": warmup_decision(rows), "warmup_tests": warmup_tests(rows)},
-    )
+    decision, tests = warmup_decision(rows), warmup_tests(rows)
+    common.write_json(out / "sac.json", {"rows": rows, "warmup": decision, "warmup_tests": tests})
     lines = [
         "## `sac` (plan: `experiments/plans/sac.md`)",
         "",
@@ -318,7 +315,7 @@ def report(results: Path) -> None:
             "",
             "Training curves (each seed's episode returns, smoothed): ![sac](sac/sac.png)",
         ]
-    lines += warmup_lines(rows)
+    lines += warmup_lines(decision, tests)
     lines += side_lines(results)
     (out / "sac.md").write_text("\n".join(lines) + "\n")
     print(f"wrote {out}/sac.json and sac.md")
