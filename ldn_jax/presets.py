@@ -136,6 +136,9 @@ _A2C_HOPPER = {**_A2C_OBS, "agent.normalize_reward": True}
 
 # The 1M steps MuJoCo results are usually quoted after (rl-baselines3-zoo).
 _LONG = {"steps": 1_000_000, "chunk_iterations": 1}
+# SAC on locomotion: 10,000 uniform random steps first, updates from there (the zoo's
+# halfcheetah constants; adopted by experiments/plans/sac-warmup.md on seeds 0-4, 2026-12-08).
+_SAC_WARMUP = {"sac": {"sac.random_steps": 10_000, "sac.learning_starts": 10_000}}
 
 TASKS: dict[str, dict[str, object]] = {
     # The budget within which the A2C and PPO families learn it (docs/defaults.md,
@@ -147,17 +150,18 @@ TASKS: dict[str, dict[str, object]] = {
             # standardised observations (docs/defaults.md, "Locomotion tasks")
             "a2c": _A2C_OBS,
             "ppo": {**_LOCOMOTION["ppo"], **_ZOO_HALFCHEETAH_PPO},
+            **_SAC_WARMUP,
         },
     },
     # the A2C family: standardised observations and rewards (docs/defaults.md, "Locomotion
     # tasks"; chosen on seeds 0-4, 2026-12-07)
-    "hopper": {**_LONG, "learners": {**_HOPPING, "a2c": _A2C_HOPPER}},
+    "hopper": {**_LONG, "learners": {**_HOPPING, "a2c": _A2C_HOPPER, **_SAC_WARMUP}},
     # the A2C family: standardised observations (chosen on seeds 0-4, 2026-12-07)
-    "walker2d": {**_LONG, "learners": {**_HOPPING, "a2c": _A2C_OBS}},
+    "walker2d": {**_LONG, "learners": {**_HOPPING, "a2c": _A2C_OBS, **_SAC_WARMUP}},
     # No support box: in 105 dimensions imagined episodes leave it at once (docs/defaults.md,
     # "Continuous control").
-    "ant": {**_LONG, "learners": _HOPPING, "model.support": None},
-    "ant-nocfrc": {**_LONG, "learners": _HOPPING, "model.support": None},
+    "ant": {**_LONG, "learners": {**_HOPPING, **_SAC_WARMUP}, "model.support": None},
+    "ant-nocfrc": {**_LONG, "learners": {**_HOPPING, **_SAC_WARMUP}, "model.support": None},
     "reacher": _LONG,
 }
 """Per task: top-level and model fields, and `"learners"`: learner -> agent fields."""

@@ -1,6 +1,6 @@
 """The `sac` learner's targets under `experiments/plans/sac.md`: inverted_pendulum at 15,000
 steps, halfcheetah and hopper at 200,000, seeds 5-9 (confirmatory) and 0-4 (exploratory),
-`ldn-jax --algo sac` as a user gets it.
+`ldn-jax --algo sac` as the plan ran it (before the warm-up was adopted; the `plan` arm).
 
     python -m experiments.paper.sac [--tasks TASK,...] [--first-seed S] [--per-run N]
         [--arm plan|warmup] [--report]
@@ -58,12 +58,14 @@ Mann-Whitney on each task, Holm over the two."""
 
 
 ARMS: dict[str, dict[str, object]] = {
-    "plan": {},
+    "plan": {"sac.random_steps": 0, "sac.learning_starts": 1000},
     "warmup": {"sac.random_steps": 10_000, "sac.learning_starts": 10_000},
 }
-"""Arm -> fields over `--algo sac`'s defaults. "plan" is the plan's `sac` as a user gets it;
-"warmup" acts uniformly at random for the first 10,000 steps and updates from there, as SB3's
-SAC under the zoo's halfcheetah constants does (`learning_starts`), exploratory only."""
+"""Arm -> fields over `--algo sac`'s defaults. "plan" is `sac` as the plan ran it: the policy
+acts from the first step and updates start at 1,000 rows (the defaults until the warm-up was
+adopted, 2026-12-08). "warmup" acts uniformly at random for the first 10,000 steps and
+updates from there, as SB3's SAC under the zoo's halfcheetah constants does, and as the
+locomotion tasks' defaults now do (`presets.TASKS`)."""
 
 SIDE_BY_SIDE = ("halfcheetah", 0, 1, 100_000)
 """Where ours runs beside SB3's SAC: task, first seed, seeds, steps."""
