@@ -1049,6 +1049,20 @@ def validate(config: Config) -> Config:
     return config
 
 
+def advisories(config: Config) -> list[str]:
+    """What a valid config does that its user may not expect, one line each (the training
+    command prints them as warnings)."""
+    sac, notes = config.sac, []
+    short = config.steps is not None and config.steps < sac.learning_starts
+    if ALGORITHMS[config.algo].learner == "sac" and short:
+        notes.append(
+            f"{config.algo} makes no update in {config.steps:,} real steps: updates start "
+            f"once the replay memory holds sac.learning_starts ({sac.learning_starts:,}) rows "
+            "(--set sac.learning_starts=N)"
+        )
+    return notes
+
+
 def _run_checks(config: Config) -> list[tuple[bool, str]]:
     """The checks of the run as a whole: seeds, K, budget, schedule, engine."""
     return [

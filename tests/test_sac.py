@@ -244,6 +244,31 @@ def test_bad_sac_settings_are_one_line(argv, needle):
     assert needle in str(error.value) and "\n" not in str(error.value)
 
 
+def test_a_run_shorter_than_learning_starts_is_warned_in_one_line(tmp_path, monkeypatch, capsys):
+    """On the locomotion tasks updates start at 10,000 rows: a shorter `sac` run trains
+    nothing, and the training command says so before it starts (and not otherwise)."""
+    from ldn_jax.config import advisories, from_preset
+    from ldn_jax.host import run
+    from ldn_jax.host.settings import UsageError
+
+    def refuse(*args, **kwargs):
+        raise UsageError("stopped before training")
+
+    monkeypatch.setattr(run, "train", refuse)
+    lines = {}
+    for steps in (5_000, 10_000):
+        argv = ["--env", "hopper", "--algo", "sac", "--steps", str(steps)]
+        assert run.main([*argv, "--out", str(tmp_path / str(steps))]) == 2
+        lines[steps] = capsys.readouterr().err.splitlines()
+    assert lines[10_000] == ["error: stopped before training"]
+    (warning, error) = lines[5_000]
+    assert warning.startswith("warning: sac makes no update in 5,000 real steps")
+    assert "sac.learning_starts (10,000)" in warning and error == lines[10_000][0]
+    # the pendulum starts at 1,000 rows; another learner has no replay memory
+    assert not advisories(from_preset("paper", env="inverted_pendulum", algo="sac", steps=5_000))
+    assert not advisories(from_preset("paper", env="hopper", algo="ppo", steps=5_000))
+
+
 # -- sac-model and sac-ldn: MBPO's branches into a model memory --------------------------------
 
 MBPO_RUN = dict(env="hopper", algo="sac-model", seeds=1, steps=60, iteration_steps=20)
@@ -444,8 +469,17 @@ def test_the_side_by_side_table_reads_ours_and_sb3s_lines(tmp_path):
     sb3 = {"task": "halfcheetah", "seed": 0, "steps": 100_000, "train_seconds": 2400}
     sb3 |= {"mean": 4321.0, "steps_per_second": 41.7}
     (tmp_path / "sac" / "sb3_sac.jsonl").write_text(json.dumps(sb3) + "\n")
+    warm = ours | {"gymnasium": [[9, 9]], "arm": "warmup"}
+    (tmp_path / "sac" / "side" / "y.json").write_text(json.dumps(warm))
     rows = [line for line in study.side_lines(tmp_path) if line.startswith("| ours")]
-    assert rows and "| 6 |" in rows[0] and "| 56 |" in rows[0] and "alone" in rows[0]
+    assert len(rows) == 2 and rows[0].startswith("| ours (`--algo sac`) |")
+    assert "| 6 |" in rows[0] and "| 56 |" in rows[0] and "alone" in rows[0]
+    assert rows[1].startswith("| ours (`--algo sac`, warm-up) |") and "| 9 |" in rows[1]
+    warmup = study.config_of("halfcheetah", 0, 1, 100_000, "warmup")
+    assert (
+        warmup.sac.random_steps == 10_000
+        and study.config_of("halfcheetah", 0, 1, 100_000).sac.random_steps == 0
+    )
     assert any(line.startswith("| SB3") and "4,321" in line for line in study.side_lines(tmp_path))
 
 

@@ -5,7 +5,7 @@ steps, halfcheetah and hopper at 200,000, seeds 5-9 (confirmatory) and 0-4 (expl
     python -m experiments.paper.sac [--tasks TASK,...] [--first-seed S] [--per-run N]
         [--arm plan|warmup] [--report]
     python -m experiments.paper.sac --tasks halfcheetah,hopper --arm warmup --first-seed 15
-    python -m experiments.paper.sac --side-by-side
+    python -m experiments.paper.sac --side-by-side [--arm warmup]
 
 Trains every run (a vmapped program of `--per-run` seeds, one by default, so that each seed's
 record lands on its own: a 5-seed 200k run takes hours on 2 cores, and a run directory does
@@ -17,8 +17,9 @@ runs of one task, budget, arm and label pooled into one row. The report also rea
 warm-up plan (`experiments/plans/sac-warmup.md`): its selection on the `warmup` arm's seeds 0-4
 and, once adopted, its confirmation on that arm's fresh seeds 15-19 (the second command).
 
-`--side-by-side` trains (or reuses) ours where SB3's SAC ran on these cores
-(`baselines/sb3_sac.py`, its JSON lines kept in `sac/sb3_sac.jsonl`): halfcheetah, seed 0,
+`--side-by-side` trains (or reuses) ours where SB3's SAC ran on these cores (`--arm warmup`:
+today's default, SB3's start; `baselines/sb3_sac.py`, its JSON lines kept in
+`sac/sb3_sac.jsonl`): halfcheetah, seed 0,
 100k steps, one seed as SB3 runs one; the report puts the two side by side (greedy return in
 gymnasium, steps per second, and how loaded the cores were, from the notes in that file).
 """
@@ -100,14 +101,15 @@ def ensure(
     cache.ensure_replayed(config, out, file, labels, (code, EPISODES))
 
 
-def side_by_side(results: Path, code: str, load: str) -> None:
+def side_by_side(results: Path, code: str, load: str, arm: str = "plan") -> None:
     """Ours where SB3's SAC ran (`SIDE_BY_SIDE`), into `sac/side/`; `load`: what else ran
-    on the cores meanwhile, in words."""
+    on the cores meanwhile, in words; `arm`: "warmup" for today's default, SB3's start."""
     task, first, seeds, steps = SIDE_BY_SIDE
-    config = config_of(task, first, seeds, steps)
-    out = run_dir(results, task, first, seeds, steps)
+    config = config_of(task, first, seeds, steps, arm)
+    out = run_dir(results, task, first, seeds, steps, arm)
     file = common.out_dir(results, "sac/side") / f"{out.name}.json"
-    cache.ensure_replayed(config, out, file, {"task": task, "load": load}, (code, EPISODES))
+    labels = {"task": task, "load": load} | ({} if arm == "plan" else {"arm": arm})
+    cache.ensure_replayed(config, out, file, labels, (code, EPISODES))
 
 
 def side_lines(results: Path) -> list[str]:
@@ -133,8 +135,9 @@ def side_lines(results: Path) -> list[str]:
         if "gymnasium" not in data:
             continue
         mean = float(np.mean(data["gymnasium"][0]))
+        who = "ours (`--algo sac`" + (", warm-up" if data.get("arm") == "warmup" else "") + ")"
         lines.append(
-            f"| ours (`--algo sac`) | {data['task']} | {data['seeds'][0]} | {data['steps']:,} | "
+            f"| {who} | {data['task']} | {data['seeds'][0]} | {data['steps']:,} | "
             f"{mean:,.0f} | {data['train_seconds']:,.0f} | "
             f"{data['env_steps_per_second']:.0f} | {data.get('load', '–')} | "
             f"{', '.join(data['commits'])} |"
@@ -345,7 +348,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--per-run must divide {SEEDS}")
     if args.side_by_side:
         common.compile_cache(args.results)
-        side_by_side(args.results, cache.code_version(), args.load)
+        side_by_side(args.results, cache.code_version(), args.load, args.arm)
     elif not args.report:
         code = cache.code_version()
         common.compile_cache(args.results)

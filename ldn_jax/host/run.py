@@ -23,7 +23,7 @@ from pathlib import Path
 
 import jax
 
-from ldn_jax.config import Config
+from ldn_jax.config import Config, advisories
 from ldn_jax.host import flags, runtime, settings, summaries
 from ldn_jax.host.loggers import NullLogger, make_logger
 from ldn_jax.host.run_dir import CheckpointWriteError, RunDir, RunDirError
@@ -74,6 +74,9 @@ def train_one(args, cache, stop: Stop | None = None) -> int:
         if args.dry_run:
             runtime.dry_run(config, mesh, cache, bool(args.bitwise))
             return 0
+        if writer and not args.resume:
+            for line in advisories(config):
+                print(f"warning: {line}", file=sys.stderr)
         if not args.resume:
             run = new_run_dir(args.out, config, held) if writer else RunDir(args.out)
         try:
