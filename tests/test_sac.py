@@ -584,6 +584,21 @@ def test_the_warmup_plan_selects_on_seeds_0_4_and_confirms_on_fresh_seeds(tmp_pa
     assert "**keep**" in text and "| halfcheetah | `warmup` > `plan` |" in text
 
 
+def test_the_rule_study_trains_only_the_plans_seeds(tmp_path, capsys, monkeypatch):
+    from experiments.paper import sac_rules as study
+
+    for bad in ("3", "10,x", "15"):
+        with pytest.raises(SystemExit) as refused:
+            study.main(["--seeds", bad, "--results", str(tmp_path)])
+        assert refused.value.code == 2 and "--seeds" in capsys.readouterr().err
+    trained = []
+    monkeypatch.setattr(study, "ensure", lambda task, arm, seed, *rest: trained.append(seed))
+    monkeypatch.setattr(study, "report", lambda results: None)
+    monkeypatch.setattr(study.common, "compile_cache", lambda results: None)
+    study.main(["--seeds", "12,11", "--tasks", "hopper", "--arms", "sac", "--results", "x"])
+    assert trained == [12, 11]
+
+
 def test_the_rule_study_tests_once_every_seed_is_in_and_corrects_by_holm(tmp_path):
     import json
 

@@ -2,14 +2,16 @@
 `sac-model` (MBPO's schedule) and `sac-ldn` (the LD draw) on hopper and halfcheetah at 100k
 real steps, UTD 1, seeds 10-14, one seed per run.
 
-    python -m experiments.paper.sac_rules [--tasks TASK,...] [--arms ARM,...] [--report]
+    python -m experiments.paper.sac_rules [--tasks TASK,...] [--arms ARM,...]
+        [--seeds SEED,...] [--report]
 
 Trains every run (resumed when interrupted, reused when finished; a finished run leaves its
 record under `records/sac-rules/`), replays each seed's greedy policy in gymnasium (10
 episodes) into `sac-rules/arms/TASK-ARM-sS.json` (committed, with the commits that trained it
 and the steps it imagined), and rebuilds `sac-rules/sac-rules.json` and `.md`: each arm's IQM,
 and the plan's six one-sided Mann-Whitney tests with Holm's correction once every seed of
-both tasks is in.
+both tasks is in. `--seeds` picks some of the plan's seeds, so that two processes can train
+two at once.
 """
 
 from __future__ import annotations
@@ -137,17 +139,25 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--tasks", default=",".join(TASKS))
     parser.add_argument("--arms", default=",".join(ARMS))
+    plan = range(FIRST_SEED, FIRST_SEED + SEEDS)
+    parser.add_argument("--seeds", default=",".join(map(str, plan)), help="the plan's: 10-14")
     parser.add_argument("--report", action="store_true", help="train nothing; rebuild the report")
     parser.add_argument("--results", type=Path, default=common.RESULTS)
     args = parser.parse_args(argv)
     tasks, arms = args.tasks.split(","), args.arms.split(",")
     if unknown := [t for t in tasks if t not in TASKS] + [a for a in arms if a not in ARMS]:
         parser.error(f"unknown task or arm: {', '.join(unknown)}")
+    try:
+        seeds = [int(s) for s in args.seeds.split(",")]
+    except ValueError:
+        parser.error(f"--seeds takes seeds of the plan ({plan[0]}-{plan[-1]}), got {args.seeds}")
+    if outside := [s for s in seeds if s not in plan]:
+        parser.error(f"--seeds: not a seed of the plan ({plan[0]}-{plan[-1]}): {outside}")
     if not args.report:
         code = cache.code_version()
         common.compile_cache(args.results)
         for task in tasks:
-            for seed in range(FIRST_SEED, FIRST_SEED + SEEDS):
+            for seed in seeds:
                 for arm in arms:
                     ensure(task, arm, seed, args.results, code)
                     report(args.results)
