@@ -408,6 +408,13 @@ def test_sac_model_runs_mbpos_schedule_and_sac_ldn_the_ld_draw():
     assert cheetah.stop.horizon_max == 1 and cheetah.fit.early_stop
     # MBPO's fit to convergence, capped at 500 minibatch steps a fit on these cores
     assert model.fit.early_stop and model.fit.updates == 500
+    # the warm-up: MBPO's 5,000 exploration steps under the preset, over the task's 10,000
+    start = lambda c: (c.sac.random_steps, c.sac.learning_starts)
+    assert start(model) == start(ldn) == start(cheetah) == (5000, 5000)
+    for env in ("halfcheetah", "hopper", "walker2d", "ant"):
+        for algo in ("sac", "sac-model", "sac-ldn"):
+            assert start(from_preset("paper", env=env, algo=algo)) == (10_000, 10_000)
+    assert start(from_preset("paper", env="inverted_pendulum", algo="sac")) == (0, 1000)
 
 
 # -- a learned termination (imagine.termination "learned") --------------------------------------
