@@ -149,8 +149,11 @@ HIGH_UTD = 4
 
 
 def _trainer_seconds(config, utd: int) -> tuple[float, float]:
-    """(training, compile) seconds of `config` at `utd`, its updates from the first batch."""
-    sac = dataclasses.replace(config.sac, utd=utd, learning_starts=config.sac.batch_size)
+    """(training, compile) seconds of `config` at `utd`, its updates from the first batch and
+    its policy acting from the first step."""
+    sac = dataclasses.replace(
+        config.sac, utd=utd, learning_starts=config.sac.batch_size, random_steps=0
+    )
     with tempfile.TemporaryDirectory() as out:
         summary = train(dataclasses.replace(config, sac=sac), out, quiet=True)
     return summary["train_seconds"], summary["compile_seconds"]

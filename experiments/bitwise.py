@@ -32,7 +32,8 @@ RUNS = {
     "branched-halfcheetah": "--env halfcheetah --algo ppo-ldn --preset branched --steps 4096",
     "branched-hopper": "--env hopper --algo ppo-model --preset branched --steps 4096",
     "branched-m0": "--env hopper --algo ppo-ldn --preset branched --ld m0 --steps 4096",
-    "sac": "--env hopper --algo sac --steps 1500 --set sac.learning_starts=500",
+    "sac": "--env hopper --algo sac --steps 1500 --set sac.learning_starts=500 "
+    "--set sac.random_steps=0",
     "sac-model": "--env hopper --algo sac-model --preset branched --steps 1000",
 }
 """Name -> the training command's flags (each run 2 seeds, quiet, into its own directory)."""

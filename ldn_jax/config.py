@@ -257,7 +257,9 @@ class SACConfig:
     random_steps: int = 0
     """Real transitions at the start of a run played with actions drawn uniformly from
     [-1, 1] instead of the policy's (SB3's and Spinning Up's warm-up; the zoo's halfcheetah
-    run: 10,000, with `learning_starts` 10,000); 0: the policy acts from the first step."""
+    run: 10,000, with `learning_starts` 10,000); 0: the policy acts from the first step.
+    The locomotion tasks set both to 10,000 (`presets.TASKS`), the `branched` preset to
+    5,000 (MBPO's)."""
     buffer_capacity: int = 1_000_000
     """Real transitions the replay memory keeps per run (a ring); a run allocates at most
     its steps budget."""
@@ -1053,13 +1055,14 @@ def advisories(config: Config) -> list[str]:
     """What a valid config does that its user may not expect, one line each (the training
     command prints them as warnings)."""
     sac, notes = config.sac, []
-    short = config.steps is not None and config.steps < sac.learning_starts
-    if ALGORITHMS[config.algo].learner == "sac" and short:
-        notes.append(
-            f"{config.algo} makes no update in {config.steps:,} real steps: updates start "
-            f"once the replay memory holds sac.learning_starts ({sac.learning_starts:,}) rows "
-            "(--set sac.learning_starts=N)"
-        )
+    if ALGORITHMS[config.algo].learner == "sac" and config.schedule == "steps":
+        most = config.iterations * config.workers * config.steps_per_iteration
+        if most < sac.learning_starts:
+            notes.append(
+                f"{config.algo} makes no update: it plays at most {most:,} real steps, and its "
+                "updates start once the replay memory holds sac.learning_starts "
+                f"({sac.learning_starts:,}) rows (--set sac.learning_starts=N)"
+            )
     return notes
 
 

@@ -262,11 +262,16 @@ def test_a_run_shorter_than_learning_starts_is_warned_in_one_line(tmp_path, monk
         lines[steps] = capsys.readouterr().err.splitlines()
     assert lines[10_000] == ["error: stopped before training"]
     (warning, error) = lines[5_000]
-    assert warning.startswith("warning: sac makes no update in 5,000 real steps")
+    assert warning.startswith("warning: sac makes no update: it plays at most 5,000 real steps")
     assert "sac.learning_starts (10,000)" in warning and error == lines[10_000][0]
+    # runs stop at whole iterations (1,000 steps): 9,001 steps play 10,000, the last updates
+    warned = lambda **run: bool(advisories(from_preset("paper", algo="sac", **run)))
+    assert not warned(env="hopper", steps=9_001) and warned(env="hopper", steps=9_000)
+    # an episodes budget: at most 9 episodes of 1,000 steps
+    assert warned(env="hopper", episodes=9) and not warned(env="hopper", episodes=10)
     # the pendulum starts at 1,000 rows; another learner has no replay memory
-    assert not advisories(from_preset("paper", env="inverted_pendulum", algo="sac", steps=5_000))
-    assert not advisories(from_preset("paper", env="hopper", algo="ppo", steps=5_000))
+    assert not warned(env="inverted_pendulum", steps=5_000)
+    assert not advisories(from_preset("paper", env="hopper", algo="ppo", steps=500))
 
 
 # -- sac-model and sac-ldn: MBPO's branches into a model memory --------------------------------
@@ -411,7 +416,8 @@ def test_sac_model_runs_mbpos_schedule_and_sac_ldn_the_ld_draw():
     # the warm-up: MBPO's 5,000 exploration steps under the preset, over the task's 10,000
     start = lambda c: (c.sac.random_steps, c.sac.learning_starts)
     assert start(model) == start(ldn) == start(cheetah) == (5000, 5000)
-    for env in ("halfcheetah", "hopper", "walker2d", "ant"):
+    assert start(from_preset("branched", env="hopper", algo="sac")) == (5000, 5000)
+    for env in ("halfcheetah", "hopper", "walker2d", "ant", "ant-nocfrc"):
         for algo in ("sac", "sac-model", "sac-ldn"):
             assert start(from_preset("paper", env=env, algo=algo)) == (10_000, 10_000)
     assert start(from_preset("paper", env="inverted_pendulum", algo="sac")) == (0, 1000)

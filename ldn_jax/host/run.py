@@ -74,11 +74,10 @@ def train_one(args, cache, stop: Stop | None = None) -> int:
         if args.dry_run:
             runtime.dry_run(config, mesh, cache, bool(args.bitwise))
             return 0
-        if writer and not args.resume:
-            for line in advisories(config):
-                print(f"warning: {line}", file=sys.stderr)
         if not args.resume:
             run = new_run_dir(args.out, config, held) if writer else RunDir(args.out)
+            for line in advisories(config) if writer else ():
+                print(f"warning: {line}", file=sys.stderr)
         try:
             logger = (
                 make_logger(args.logger, run.path, config, args.wandb_project)
