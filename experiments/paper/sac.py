@@ -17,11 +17,11 @@ runs of one task, budget, arm and label pooled into one row. The report also rea
 warm-up plan (`experiments/plans/sac-warmup.md`): its selection on the `warmup` arm's seeds 0-4
 and, once adopted, its confirmation on that arm's fresh seeds 15-19 (the second command).
 
-`--side-by-side` trains (or reuses) ours where SB3's SAC ran on these cores (`--arm warmup`:
-today's default, SB3's start; `baselines/sb3_sac.py`, its JSON lines kept in
-`sac/sb3_sac.jsonl`): halfcheetah, seed 0,
-100k steps, one seed as SB3 runs one; the report puts the two side by side (greedy return in
-gymnasium, steps per second, and how loaded the cores were, from the notes in that file).
+`--side-by-side` trains (or reuses) ours where SB3's SAC ran on these cores
+(`baselines/sb3_sac.py`, its JSON lines kept in `sac/sb3_sac.jsonl`): halfcheetah, seed 0,
+100k steps, one seed as SB3 runs one; `--arm warmup` for today's default, SB3's start. The
+report puts the two side by side (greedy return in gymnasium, steps per second, and how
+loaded the cores were, from the notes in that file).
 """
 
 from __future__ import annotations
